@@ -1,0 +1,32 @@
+"""ament_python package setup for ssm_localization."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'ssm_localization'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml', 'README.md']),
+        ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'pillow', 'rosbags', 'mcap'],
+    extras_require={'plot': ['matplotlib'], 'test': ['pytest']},
+    zip_safe=True,
+    maintainer='ssm_localization maintainers',
+    maintainer_email='maintainers@ssm-localization.invalid',
+    description='Single-scan global localization with spectral scan matching (Park & Park).',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'ssm_localization = ssm_localization.cli:main',
+            'map_indexer = ssm_localization.ros.map_indexer:main',
+            'global_localizer = ssm_localization.ros.global_localizer:main',
+        ],
+    },
+)

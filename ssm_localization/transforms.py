@@ -1,0 +1,63 @@
+"""Rigid 2-D transforms (SE(2)) as ``(x, y, yaw)`` triples and 3x3 matrices.
+
+Convention everywhere in the package: a pose ``T_a_b = (x, y, yaw)`` maps points from frame b
+into frame a: ``p_a = R(yaw) @ p_b + (x, y)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+Pose2 = tuple[float, float, float]
+
+
+def wrap_angle(a):
+    """Wrap angle(s) to [-pi, pi)."""
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def rotation(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def to_matrix(pose) -> np.ndarray:
+    x, y, yaw = pose
+    m = np.eye(3)
+    m[:2, :2] = rotation(yaw)
+    m[:2, 2] = (x, y)
+    return m
+
+
+def from_matrix(m: np.ndarray) -> Pose2:
+    return (float(m[0, 2]), float(m[1, 2]), float(np.arctan2(m[1, 0], m[0, 0])))
+
+
+def compose(a, b) -> Pose2:
+    """``a * b``: the pose of frame c in frame a, given ``a = T_a_b`` and ``b = T_b_c``."""
+    ax, ay, ayaw = a
+    bx, by, byaw = b
+    c, s = np.cos(ayaw), np.sin(ayaw)
+    return (float(ax + c * bx - s * by), float(ay + s * bx + c * by),
+            float(wrap_angle(ayaw + byaw)))
+
+
+def inverse(a) -> Pose2:
+    x, y, yaw = a
+    c, s = np.cos(yaw), np.sin(yaw)
+    return (float(-c * x - s * y), float(s * x - c * y), float(wrap_angle(-yaw)))
+
+
+def apply(pose, points: np.ndarray) -> np.ndarray:
+    """Map (N, 2) points from the child frame into the parent frame of ``pose``."""
+    x, y, yaw = pose
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    return pts @ rotation(yaw).T + np.array([x, y])
+
+
+def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation about z."""
+    return (0.0, 0.0, float(np.sin(yaw / 2.0)), float(np.cos(yaw / 2.0)))
+
+
+def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
+    return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
