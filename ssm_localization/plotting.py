@@ -7,3 +7,83 @@ def _pyplot():
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     return plt
+
+
+def plot_replay(index, rows, path, title: str = '') -> None:
+    """Map, topological nodes, ground truth and estimates (colored by status) of a replay."""
+    import numpy as np
+    plt = _pyplot()
+    grid = index.map
+    h, w = grid.data.shape
+    ox, oy, _ = grid.origin
+    extent = (ox, ox + w * grid.resolution, oy, oy + h * grid.resolution)
+    img = np.where(grid.data < 0, 0.75, 1.0 - np.clip(grid.data, 0, 100) / 100.0)
+    fig, ax = plt.subplots(figsize=(9, 9 * h / max(w, 1) + 0.5))
+    ax.imshow(img, cmap='gray', origin='lower', extent=extent, vmin=0, vmax=1)
+    ax.scatter(index.node_xy[:, 0], index.node_xy[:, 1], s=6, c='tab:blue', alpha=0.5,
+               label='nodes')
+    colors = {'ok': 'tab:green', 'ambiguous': 'tab:orange', 'failed': 'tab:red'}
+    gt = np.array([(r.gt_x, r.gt_y) for r in rows if r.has_truth])
+    if len(gt):
+        ax.scatter(gt[:, 0], gt[:, 1], s=28, facecolors='none', edgecolors='k', label='ground truth')
+    for status, color in colors.items():
+        sel = [r for r in rows if r.status == status and not np.isnan(r.x)]
+        if not sel:
+            continue
+        xy = np.array([(r.x, r.y) for r in sel])
+        yaw = np.array([r.yaw for r in sel])
+        ax.quiver(xy[:, 0], xy[:, 1], np.cos(yaw), np.sin(yaw), color=color, scale=40, width=0.003,
+                  label=f'{status} ({len(sel)})')
+        wrong = [r for r in sel if r.has_truth and not r.correct]
+        for r in wrong:
+            ax.plot([r.x, r.gt_x], [r.y, r.gt_y], color='tab:red', lw=0.8)
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title or 'single-scan global localization')
+    ax.legend(loc='upper right', fontsize=8)
+    ax.set_aspect('equal')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_index(index, path, title: str = '', show_ids: bool = True) -> None:
+    """Map, GVD and topological nodes (colored by kind, with their ids) of a ``MapIndex``."""
+    import numpy as np
+    from .topology import NODE_KIND_NAMES
+    plt = _pyplot()
+    grid = index.map
+    h, w = grid.data.shape
+    ox, oy, _ = grid.origin
+    extent = (ox, ox + w * grid.resolution, oy, oy + h * grid.resolution)
+    img = np.where(grid.data < 0, 0.75, 1.0 - np.clip(grid.data, 0, 100) / 100.0)
+    fig, ax = plt.subplots(figsize=(10, 10 * h / max(w, 1) + 0.8))
+    ax.imshow(img, cmap='gray', origin='lower', extent=extent, vmin=0, vmax=1,
+              interpolation='nearest')
+    gvd = np.ma.masked_where(~np.asarray(index.gvd_mask, dtype=bool), np.ones((h, w)))
+    ax.imshow(gvd, cmap='autumn', origin='lower', extent=extent, alpha=0.6,
+              interpolation='nearest')
+    xy = np.asarray(index.node_xy).reshape(-1, 2)
+    for a, b in np.asarray(getattr(index, 'edges', np.zeros((0, 2))), dtype=int).reshape(-1, 2):
+        ax.plot(xy[[a, b], 0], xy[[a, b], 1], color='tab:gray', lw=0.5, alpha=0.6)
+    kinds = np.asarray(index.node_kind)
+    colors = ('tab:red', 'tab:green', 'tab:blue', 'tab:purple')
+    for k, name in enumerate(NODE_KIND_NAMES):
+        sel = kinds == k
+        if sel.any():
+            ax.scatter(xy[sel, 0], xy[sel, 1], s=18, c=colors[k % len(colors)], zorder=3,
+                       label=f'{name} ({int(sel.sum())})')
+    if show_ids and len(xy) <= 2000:
+        size = 6 if len(xy) < 200 else 4
+        for i, (x, y) in enumerate(xy):
+            ax.annotate(str(i), (x, y), xytext=(2, 2), textcoords='offset points',
+                        fontsize=size, zorder=4)
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title or f'topological index: {len(xy)} nodes')
+    if len(xy):
+        ax.legend(loc='upper right', fontsize=8)
+    ax.set_aspect('equal')
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

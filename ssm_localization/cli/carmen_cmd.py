@@ -1,0 +1,54 @@
+"""``ssm_localization convert-carmen LOG -o OUTDIR``: CARMEN log -> map (YAML+PGM) + query bag."""
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('log', help='CARMEN log (.log or .log.gz) with corrected FLASER poses')
+    parser.add_argument('-o', '--out', required=True, help='output directory')
+    parser.add_argument('--name', help='base name of the outputs (default: from the log name)')
+    parser.add_argument('--map-scans', choices=('even', 'odd', 'all'), default='even',
+                        help='scans that build the map (default: even)')
+    parser.add_argument('--query-scans', choices=('even', 'odd', 'all'), default='odd',
+                        help='scans written to the query bag (default: odd)')
+    parser.add_argument('--every', type=int, default=1, help='keep every N-th query scan')
+    parser.add_argument('--max-scans', type=int, help='at most this many query scans')
+    parser.add_argument('--first', type=int, help='first scan index used (map and queries)')
+    parser.add_argument('--last', type=int, help='scan index to stop before (map and queries)')
+    parser.add_argument('--resolution', type=float, default=0.05, help='map resolution, m')
+    parser.add_argument('--free-cap', type=float, default=5.0,
+                        help='no-return beams clear space up to this distance, m')
+    parser.add_argument('--no-odom', action='store_true', help='do not write /odom')
+    parser.add_argument('--bag-out', help='bag directory (default: OUTDIR/NAME_queries)')
+    parser.add_argument('--no-bag', action='store_true', help='only write the map')
+    parser.add_argument('--force', action='store_true', help='overwrite an existing bag')
+    parser.add_argument('--quiet', action='store_true', help='no progress bar')
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..progress import ProgressBar
+
+    if args.resolution <= 0 or args.every < 1 or (args.max_scans or 1) < 1:
+        raise ValueError('--resolution must be > 0, --every and --max-scans >= 1')
+    bar = ProgressBar(1, 'convert', enabled=not args.quiet)
+    try:
+        res = _convert(args, bar)
+    except FileExistsError as exc:   # the dispatcher reports ValueErrors as one clean line
+        raise ValueError(str(exc)) from None
+    h, w = res.map_shape
+    print(f'map: {res.map_yaml} ({w} x {h} cells, {res.map_scans} scans)')
+    if res.bag is not None:
+        print(f'bag: {res.bag} ({res.query_scans} scans)')
+    return 0
+
+
+def _convert(args, bar):
+    from ..carmen import MapBuildConfig, convert_carmen
+    return convert_carmen(args.log, args.out, name=args.name, map_scans=args.map_scans,
+                          query_scans=args.query_scans, every=args.every,
+                          max_scans=args.max_scans, first=args.first, last=args.last,
+                          config=MapBuildConfig(resolution=args.resolution,
+                                                free_cap=args.free_cap),
+                          with_odom=not args.no_odom, write_queries=not args.no_bag,
+                          overwrite=args.force, bag_path=args.bag_out, progress=bar)

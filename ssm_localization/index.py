@@ -1,0 +1,310 @@
+"""The topological index of a grid map (paper section III): GVD nodes with virtual 360-degree scans.
+
+``build_index`` extracts the nodes (``topology.py``), casts a virtual scan at every node
+(``raycast.py``, Table 1: the virtual laser's pose is the node pose ``(x, y, 0)`` composed with
+the sensor pose on the robot) and precomputes the matcher's per-scan features
+(``scan.prepare_scan``). ``save_index`` / ``load_index`` store it as a versioned ``.npz`` without
+pickles: arrays, the map checksum and every parameter as a JSON string.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from .map_io import OccupancyMap
+from .matcher import MatcherConfig
+from .progress import ProgressCallback
+from .raycast import beam_angles as _beam_angles
+from .raycast import cast_rays
+from .scan import ScanFeatures, prepare_scan
+from .topology import NODE_KIND_NAMES, NodeKind, TopologyConfig, build_topology
+from .transforms import compose
+
+#: Version of the ``.npz`` layout written by :func:`save_index`; other versions are refused.
+FORMAT_VERSION = 1
+
+__all__ = ['FORMAT_VERSION', 'IndexConfig', 'MapIndex', 'NodeKind', 'NODE_KIND_NAMES',
+           'build_index', 'save_index', 'load_index', 'load_index_config', 'distance_field']
+
+
+@dataclass(frozen=True)
+class IndexConfig:
+    """Index parameters. ``beams`` virtual beams over 360 deg from -pi counterclockwise,
+    ``max_range`` (m) of the virtual laser, ``sensor_pose`` (x, y, yaw) of the laser on the robot
+    (Table 1: x_sens, y_sens, theta_sens), ``occupied_thresh``: occupancy at or above which a cell
+    stops a beam (unknown cells do not)."""
+
+    topology: TopologyConfig = field(default_factory=TopologyConfig)
+    beams: int = 360
+    max_range: float = 20.0
+    sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    occupied_thresh: int = 65
+    matcher: MatcherConfig = field(default_factory=MatcherConfig)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.beams, int) or isinstance(self.beams, bool) or self.beams < 8:
+            raise ValueError(f'IndexConfig.beams: expected an integer >= 8, got {self.beams!r}')
+        if not (isinstance(self.max_range, (int, float)) and self.max_range > 0
+                and math.isfinite(self.max_range)):
+            raise ValueError(f'IndexConfig.max_range: expected a number > 0, got '
+                             f'{self.max_range!r}')
+        pose = tuple(float(v) for v in self.sensor_pose)
+        if len(pose) != 3 or not all(map(math.isfinite, pose)):
+            raise ValueError(f'IndexConfig.sensor_pose: expected finite (x, y, yaw), got '
+                             f'{self.sensor_pose!r}')
+        object.__setattr__(self, 'sensor_pose', pose)
+        if not 1 <= self.occupied_thresh <= 100:
+            raise ValueError(f'IndexConfig.occupied_thresh: expected 1..100, got '
+                             f'{self.occupied_thresh!r}')
+
+    def to_json(self) -> str:
+        from .params import flatten
+        return json.dumps(flatten(self), sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> 'IndexConfig':
+        from .params import from_dict, unflatten
+        return from_dict(cls, unflatten(json.loads(text)))
+
+
+def _empty(shape, dtype) -> np.ndarray:
+    return np.zeros(shape, dtype=dtype)
+
+
+@dataclass(frozen=True, eq=False)
+class MapIndex:
+    """A built index. Per node k: ``node_xy[k]`` (map frame), ``node_kind[k]``
+    (:class:`NodeKind`), ``node_sensor_pose[k]`` the virtual laser's pose (map frame),
+    ``ranges[k]`` its virtual scan over ``beam_angles`` (inf: no return), ``features[k]`` the
+    matcher features of that scan (points in the laser frame). ``gvd_mask`` (H, W) bool,
+    ``distance_field`` (H, W) float32: metres from each cell centre to the nearest occupied cell
+    centre (inf if the map has none). ``edges`` (E, 2) node pairs adjacent along the GVD,
+    ``node_clearance`` (K,) brushfire distance (m) at the nodes."""
+
+    map: OccupancyMap
+    node_xy: np.ndarray
+    node_kind: np.ndarray
+    node_sensor_pose: np.ndarray
+    ranges: np.ndarray
+    beam_angles: np.ndarray
+    features: list[ScanFeatures]
+    gvd_mask: np.ndarray
+    distance_field: np.ndarray
+    config: IndexConfig
+    map_checksum: str
+    version: int = FORMAT_VERSION
+    edges: np.ndarray = field(default_factory=lambda: _empty((0, 2), np.int64))
+    node_clearance: np.ndarray = field(default_factory=lambda: _empty((0,), np.float64))
+
+    def __len__(self) -> int:
+        return len(self.node_xy)
+
+    def kind_counts(self) -> dict[str, int]:
+        counts = np.bincount(np.asarray(self.node_kind, dtype=np.int64),
+                             minlength=len(NODE_KIND_NAMES))
+        return {name: int(counts[i]) for i, name in enumerate(NODE_KIND_NAMES)}
+
+
+def distance_field(occ_map: OccupancyMap, occupied_thresh: int = 65) -> np.ndarray:
+    """Metres (float32, (H, W)) from each cell centre to the nearest occupied cell centre."""
+    occ = occ_map.occupied_mask(occupied_thresh)
+    if not occ.any():
+        return np.full(occ.shape, np.inf, dtype=np.float32)
+    return (ndimage.distance_transform_edt(~occ) * occ_map.resolution).astype(np.float32)
+
+
+def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
+                progress: ProgressCallback | None = None) -> MapIndex:
+    """Nodes, virtual scans and their matcher features for ``occ_map`` (paper section III)."""
+    cfg = config or IndexConfig()
+    if not isinstance(occ_map, OccupancyMap):
+        raise ValueError(f'build_index: expected an OccupancyMap, got {type(occ_map).__name__}')
+    user = progress or (lambda done, total, label: None)
+
+    def report(done: int, total: int, label: str, lo: int = 0, hi: int = 100) -> None:
+        # one 0..100 scale over the stages: topology 0-30, scans 30-60, features 60-100
+        user(lo + (hi - lo) * done // max(total, 1), 100, label)
+
+    topo = build_topology(occ_map, cfg.topology,
+                          lambda d, t, label: report(d, t, f'topology ({label})', 0, 30))
+    k = len(topo)
+    poses = np.array([compose((float(x), float(y), 0.0), cfg.sensor_pose)
+                      for x, y in topo.node_xy], dtype=float).reshape(-1, 3)
+    angles = _beam_angles(cfg.beams)
+    occupied = occ_map.occupied_mask(cfg.occupied_thresh)
+    ranges = np.full((k, len(angles)), np.inf)
+    chunk = 64
+    for s in range(0, k, chunk):
+        report(s, k, 'virtual scans', 30, 60)
+        ranges[s:s + chunk] = cast_rays(occupied, occ_map.resolution, occ_map.origin,
+                                        poses[s:s + chunk], angles, cfg.max_range)
+    cos, sin = np.cos(angles), np.sin(angles)
+    features = []
+    for i in range(k):
+        if i % 16 == 0:
+            report(i, k, 'features', 60, 100)
+        ok = np.isfinite(ranges[i])
+        pts = np.column_stack((ranges[i, ok] * cos[ok], ranges[i, ok] * sin[ok]))
+        features.append(prepare_scan(pts, cfg.matcher))
+    report(k, k, 'done')
+    return MapIndex(map=occ_map, node_xy=topo.node_xy, node_kind=topo.node_kind,
+                    node_sensor_pose=poses, ranges=ranges, beam_angles=angles,
+                    features=features, gvd_mask=topo.gvd_mask,
+                    distance_field=distance_field(occ_map, cfg.occupied_thresh), config=cfg,
+                    map_checksum=occ_map.checksum(), version=FORMAT_VERSION,
+                    edges=topo.edges, node_clearance=topo.node_clearance)
+
+
+# --------------------------------------------------------------------------- npz storage
+
+_FEAT = 'feat__'
+
+
+def save_index(index: MapIndex, path: str | Path) -> Path:
+    """Write ``index`` to ``path`` (compressed npz, no pickled objects); returns the path."""
+    path = Path(path)
+    arrays: dict[str, np.ndarray] = {
+        'format_version': np.asarray(FORMAT_VERSION, dtype=np.int64),
+        'config_json': np.asarray(index.config.to_json()),
+        'map_checksum': np.asarray(index.map_checksum),
+        'map_data': index.map.data,
+        'map_resolution': np.asarray(index.map.resolution, dtype=np.float64),
+        'map_origin': np.asarray(index.map.origin, dtype=np.float64),
+        'map_frame_id': np.asarray(index.map.frame_id),
+        'node_xy': np.asarray(index.node_xy, dtype=np.float64).reshape(-1, 2),
+        'node_kind': np.asarray(index.node_kind, dtype=np.int8),
+        'node_sensor_pose': np.asarray(index.node_sensor_pose, dtype=np.float64).reshape(-1, 3),
+        'node_clearance': np.asarray(index.node_clearance, dtype=np.float64),
+        'edges': np.asarray(index.edges, dtype=np.int64).reshape(-1, 2),
+        'ranges': np.asarray(index.ranges, dtype=np.float64),
+        'beam_angles': np.asarray(index.beam_angles, dtype=np.float64),
+        'gvd_mask': np.asarray(index.gvd_mask, dtype=bool),
+        'distance_field': np.asarray(index.distance_field, dtype=np.float32),
+    }
+    per_node = [f.to_arrays() for f in index.features]
+    names = [f.name for f in dataclasses.fields(ScanFeatures)]
+    arrays['feature_fields'] = np.asarray(names)
+    for name in names:
+        parts = [np.asarray(d[name]) for d in per_node]
+        lengths = [len(p) if p.ndim else 1 for p in parts]
+        arrays[f'{_FEAT}{name}__offsets'] = np.concatenate(([0], np.cumsum(lengths))).astype(
+            np.int64)
+        if parts:
+            arrays[f'{_FEAT}{name}'] = np.concatenate([np.atleast_1d(p) for p in parts])
+        else:
+            arrays[f'{_FEAT}{name}'] = np.zeros((0,))
+    for key, a in arrays.items():
+        if a.dtype == object:
+            raise ValueError(f'save_index: {key} would need pickling')
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + '.tmp')
+    with open(tmp, 'wb') as fh:
+        np.savez_compressed(fh, **arrays)
+    os.replace(tmp, path)
+    return path
+
+
+def load_index(path: str | Path, expected_map: OccupancyMap | None = None) -> MapIndex:
+    """Read an index written by :func:`save_index` (never unpickles).
+
+    Raises ``ValueError`` for a file of another format version, a corrupt file, or (with
+    ``expected_map``) an index built for another map; ``FileNotFoundError`` if it is missing.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f'index file not found: {path}')
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {key: z[key] for key in z.files}
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise ValueError(f'{path}: not a readable index file ({exc})') from None
+    if 'format_version' not in data:
+        raise ValueError(f'{path}: not an ssm_localization index (no format_version)')
+    version = int(data['format_version'])
+    if version != FORMAT_VERSION:
+        raise ValueError(f'{path}: index format version {version}, this ssm_localization reads '
+                         f'version {FORMAT_VERSION}; rebuild it with `ssm_localization index`')
+    try:
+        occ_map = OccupancyMap(data['map_data'], float(data['map_resolution']),
+                               tuple(data['map_origin'].tolist()), str(data['map_frame_id']))
+        checksum = str(data['map_checksum'])
+        if occ_map.checksum() != checksum:
+            raise ValueError('stored map does not match its checksum (corrupt file)')
+        if expected_map is not None and expected_map.checksum() != checksum:
+            raise ValueError(f'index was built for another map (checksum {checksum[:12]}..., '
+                             f'expected {expected_map.checksum()[:12]}...); rebuild it for '
+                             f'this map')
+        config = IndexConfig.from_json(str(data['config_json']))
+        k = len(data['node_xy'])
+        names = [str(n) for n in data['feature_fields']]
+        features = []
+        offs = {n: data[f'{_FEAT}{n}__offsets'] for n in names}
+        for i in range(k):
+            arrs = {n: data[f'{_FEAT}{n}'][offs[n][i]:offs[n][i + 1]] for n in names}
+            features.append(ScanFeatures.from_arrays(arrs))
+        index = MapIndex(
+            map=occ_map, node_xy=data['node_xy'], node_kind=data['node_kind'],
+            node_sensor_pose=data['node_sensor_pose'], ranges=data['ranges'],
+            beam_angles=data['beam_angles'], features=features, gvd_mask=data['gvd_mask'],
+            distance_field=data['distance_field'], config=config, map_checksum=checksum,
+            version=version, edges=data['edges'], node_clearance=data['node_clearance'])
+    except KeyError as exc:
+        raise ValueError(f'{path}: index file lacks array {exc}') from None
+    except ValueError as exc:
+        raise ValueError(f'{path}: {exc}') from None
+    shapes_ok = (index.node_kind.shape == (k,) and index.node_sensor_pose.shape == (k, 3)
+                 and index.ranges.shape == (k, len(index.beam_angles))
+                 and index.gvd_mask.shape == occ_map.shape
+                 and index.distance_field.shape == occ_map.shape)
+    if not shapes_ok:
+        raise ValueError(f'{path}: inconsistent array shapes (corrupt file)')
+    return index
+
+
+# --------------------------------------------------------------------------- parameters
+
+def load_index_config(path: str | Path) -> IndexConfig:
+    """:class:`IndexConfig` from a YAML params file (``yaml.safe_load``).
+
+    Accepts a flat mapping of IndexConfig / TopologyConfig field names (nested ``topology:`` and
+    ``matcher:`` mappings allowed), a ROS params file ``map_indexer: ros__parameters: {...}``
+    (dotted names allowed; keys that are not index parameters are left to the node), or a
+    ``global_localizer`` params file with an ``index:`` section.
+    """
+    from .params import from_dict, load_yaml_mapping, node_section, unflatten
+    data = load_yaml_mapping(path)
+    ros = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
+    section = node_section(data, 'map_indexer') if ros else data
+    if ros and not section:
+        section = node_section(data, 'global_localizer')
+    if any('.' in str(key) for key in section):
+        section = unflatten(section)
+    if isinstance(section.get('index'), dict):
+        section = section['index']
+    idx_names = {f.name for f in dataclasses.fields(IndexConfig)}
+    topo_names = {f.name for f in dataclasses.fields(TopologyConfig)}
+    topo = dict(section.get('topology') or {})
+    kwargs = {}
+    for key, value in section.items():
+        if key == 'topology':
+            continue
+        if key in idx_names:
+            kwargs[key] = value
+        elif key in topo_names:
+            topo[key] = value
+        elif not ros:
+            kwargs[key] = value  # from_dict names the unknown key
+    if topo:
+        kwargs['topology'] = topo
+    try:
+        return from_dict(IndexConfig, kwargs)
+    except ValueError as exc:
+        raise ValueError(f'{path}: {exc}') from None

@@ -1,0 +1,279 @@
+"""Global localization of one laser scan on an indexed map (paper section IV, and beyond).
+
+Pipeline for one query scan (laser frame points ``q``):
+1. prefilter: every query descriptor votes for the nodes owning its nearest node descriptors
+   (one KD-tree query over all nodes, built at start-up); the ``prefilter`` best nodes go on;
+2. coarse (IV.A): rank those nodes by the spectral matching score (eq. 5 at the binarized
+   solution of eq. 6); keep the top ``top_n``;
+3. fine (IV.B): RANSAC pose of the query against each candidate's virtual scan, vicinity score
+   (eq. 10, ``sigma_d``); the node frame turns the local pose into a map-frame laser pose;
+4. beyond the paper: each hypothesis is refined on the map's wall surface (``refine.py``) and
+   verified by ray casting; the status is ``ok`` / ``ambiguous`` / ``failed``.
+With ``paper_mode=True`` steps 1 and 4 are skipped and the largest vicinity score wins, which is
+the plain method of the paper (the benchmark compares both).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .index import MapIndex
+from .matcher import match_features, spectral_score
+from .raycast import cast_rays
+from .refine import BeamCheck, SurfaceModel, check_beams, refine_pose
+from .scan import prepare_scan, ranges_to_points
+from .transforms import Pose2, apply, compose, inverse, wrap_angle
+
+STATUSES = ('ok', 'ambiguous', 'failed')
+
+
+@dataclass(frozen=True)
+class LocalizerConfig:
+    """Parameters of the localizer (the matcher's own come from the index it was built with)."""
+
+    top_n: int = 5                    # candidates kept by the coarse stage (paper: N = 5)
+    prefilter: int = 16               # nodes kept by descriptor voting before spectral ranking; 0 = all
+    vote_neighbours: int = 8          # node descriptors looked up per query descriptor
+    sigma_d: float = 0.05             # eq. (10), metres
+    laser_pose: Pose2 = (0.0, 0.0, 0.0)   # the laser's pose on the robot base (x, y, yaw)
+    paper_mode: bool = False          # plain paper pipeline: no prefilter, refinement or checks
+    refine: bool = True               # Gauss-Newton on the map's wall surface
+    surface_depth: float = 0.5        # cells behind the occupied-cell boundary where walls are
+    refine_iterations: int = 12
+    max_cast_range: float = 30.0      # ray-cast range for the beam check, metres
+    beam_tolerance: float = 0.15      # metres (+2 % of the range) for a beam to agree with the map
+    min_score: float = 0.45           # BeamCheck.score below which a hypothesis is rejected
+    max_contradicting: float = 0.15   # fraction of beams seeing through walls that rejects it
+    ambiguity_ratio: float = 1.5      # a distinct rival whose fit cost is within this factor: ambiguous
+    distinct_xy: float = 0.5          # poses further apart than this are distinct (m) ...
+    distinct_yaw: float = np.deg2rad(10.0)  # ... or than this (rad)
+    min_points: int = 10              # fewer valid beams than this: failed
+
+    def __post_init__(self) -> None:
+        if self.top_n < 1:
+            raise ValueError('top_n must be >= 1')
+        if self.sigma_d <= 0:
+            raise ValueError('sigma_d must be > 0')
+
+
+@dataclass
+class Hypothesis:
+    """One candidate pose: a node, its scores and the resulting laser pose in the map frame."""
+
+    node: int
+    spectral: float
+    vicinity: float = 0.0
+    laser_pose: Pose2 = (0.0, 0.0, 0.0)
+    pose: Pose2 = (0.0, 0.0, 0.0)           # base pose in the map frame
+    covariance: np.ndarray | None = None
+    check: BeamCheck | None = None
+    cost: float = float('inf')              # mean truncated squared surface residual (m^2)
+    n_pairs: int = 0
+
+    @property
+    def score(self) -> float:
+        """Beam agreement with the map once verified, else the vicinity score of eq. (10)."""
+        return self.check.score if self.check is not None else self.vicinity
+
+    def plausible(self, cfg: 'LocalizerConfig') -> bool:
+        return (self.check is not None and self.check.score >= cfg.min_score
+                and self.check.contradicting <= cfg.max_contradicting)
+
+
+@dataclass
+class Localization:
+    """The answer for one scan. ``pose`` is the robot base in the map frame."""
+
+    status: str
+    pose: Pose2 | None
+    covariance: np.ndarray = field(default_factory=lambda: np.diag([1e3, 1e3, 1e3]))
+    node: int = -1
+    score: float = float('nan')
+    candidates: list[Hypothesis] = field(default_factory=list)
+    latency_ms: float = 0.0
+    message: str = ''
+
+    @property
+    def ok(self) -> bool:
+        return self.status == 'ok'
+
+
+def vicinity_score(node_points: np.ndarray, query_points: np.ndarray, pose: Pose2,
+                   sigma_d: float, tree: cKDTree | None = None) -> float:
+    """Eq. (10): ``sum_i 4.5 - d_i^2 / (2 sigma_d^2)`` over pairs closer than ``3 sigma_d``.
+
+    Pairs are each query point (moved into the node frame by ``pose``) and its nearest node point.
+    """
+    if len(node_points) == 0 or len(query_points) == 0:
+        return 0.0
+    tree = tree if tree is not None else cKDTree(node_points)
+    d, _ = tree.query(apply(pose, query_points), distance_upper_bound=3.0 * sigma_d)
+    d = d[np.isfinite(d)]
+    return float(np.sum(4.5 - d ** 2 / (2.0 * sigma_d ** 2)))
+
+
+def _distinct(a: Pose2, b: Pose2, cfg: LocalizerConfig) -> bool:
+    return (np.hypot(a[0] - b[0], a[1] - b[1]) > cfg.distinct_xy
+            or abs(wrap_angle(a[2] - b[2])) > cfg.distinct_yaw)
+
+
+class GlobalLocalizer:
+    """Single-scan global localization against a :class:`MapIndex`.
+
+    Everything that depends on the map only (node KD-trees, the descriptor vote tree, the wall
+    surface model) is built here once; ``localize_*`` does per-scan work only.
+    """
+
+    def __init__(self, index: MapIndex, config: LocalizerConfig | None = None):
+        self.index = index
+        self.config = config or LocalizerConfig()
+        self.matcher_config = index.config.matcher
+        if len(index.features) == 0:
+            raise ValueError('the map index has no nodes: nothing to localize against')
+        self._node_trees = [cKDTree(f.points) if len(f.points) else None for f in index.features]
+        desc = [f.descriptors for f in index.features]
+        self._desc_owner = np.concatenate([np.full(len(d), k) for k, d in enumerate(desc)])
+        stacked = np.concatenate(desc) if len(self._desc_owner) else np.zeros((0, 1))
+        self._desc_tree = cKDTree(stacked) if len(stacked) else None
+        self._desc_count = np.bincount(self._desc_owner, minlength=len(desc)).astype(float)
+        m = index.map
+        self._occupied = m.occupied_mask()
+        self._surface = SurfaceModel.from_occupancy(self._occupied, m.resolution, m.origin,
+                                                    self.config.surface_depth)
+
+    # -- entry points -----------------------------------------------------------------------
+    def localize_scan(self, ranges, angle_min: float, angle_increment: float,
+                      range_min: float = 0.0, range_max: float = float('inf')) -> Localization:
+        """Localize a LaserScan given by its ranges and beam geometry."""
+        t0 = time.perf_counter()
+        ranges = np.asarray(ranges, dtype=float).ravel()
+        try:
+            points, idx = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
+        except ValueError as exc:
+            return self._failed(t0, f'bad scan: {exc}')
+        angles = angle_min + angle_increment * np.arange(len(ranges))
+        beams = np.where((ranges >= range_min) & (ranges <= range_max), ranges, np.inf)
+        beams[np.isnan(ranges)] = np.nan
+        keep = ~np.isnan(beams)
+        return self._localize(points, angles[keep], beams[keep], t0)
+
+    def localize_points(self, points_xy: np.ndarray) -> Localization:
+        """Localize laser-frame points given in scan order (no no-return information)."""
+        t0 = time.perf_counter()
+        pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        return self._localize(pts, np.arctan2(pts[:, 1], pts[:, 0]), np.hypot(pts[:, 0], pts[:, 1]), t0)
+
+    # -- stages -----------------------------------------------------------------------------
+    def _failed(self, t0: float, message: str, candidates=None) -> Localization:
+        return Localization(status='failed', pose=None, candidates=candidates or [],
+                            latency_ms=(time.perf_counter() - t0) * 1e3, message=message)
+
+    def prefilter(self, query) -> np.ndarray:
+        """Nodes ordered by descriptor votes (each query point votes once per node)."""
+        n_nodes = len(self.index.features)
+        cfg = self.config
+        if cfg.paper_mode or cfg.prefilter <= 0 or cfg.prefilter >= n_nodes or self._desc_tree is None:
+            return np.arange(n_nodes)
+        k = min(cfg.vote_neighbours, len(self._desc_owner))
+        _, nn = self._desc_tree.query(query.descriptors, k=k)
+        owners = self._desc_owner[np.asarray(nn).reshape(len(query.descriptors), -1)]
+        votes = np.zeros(n_nodes)
+        for row in owners:
+            votes[np.unique(row)] += 1.0
+        return np.argsort(-votes, kind='stable')[:cfg.prefilter]
+
+    def coarse(self, query, nodes: np.ndarray) -> list[Hypothesis]:
+        """Eq. (5)-(6) score of every node in ``nodes``; the ``top_n`` best (section IV.A)."""
+        scored = []
+        for k in nodes:
+            s, _ = spectral_score(self.index.features[k], query, self.matcher_config)
+            scored.append(Hypothesis(node=int(k), spectral=float(s)))
+        scored.sort(key=lambda h: -h.spectral)
+        return scored[:self.config.top_n]
+
+    def fine(self, query, hyps: list[Hypothesis]) -> list[Hypothesis]:
+        """RANSAC pose per candidate and the vicinity score of eq. (10) (section IV.B)."""
+        base_from_laser = inverse(self.config.laser_pose)
+        out = []
+        for h in hyps:
+            feats = self.index.features[h.node]
+            m = match_features(feats, query, self.matcher_config)
+            if not m.ok:
+                continue
+            h.n_pairs = len(m.pairs)
+            h.vicinity = vicinity_score(feats.points, query.points, m.pose, self.config.sigma_d,
+                                        self._node_trees[h.node])
+            h.laser_pose = compose(tuple(self.index.node_sensor_pose[h.node]), m.pose)
+            h.pose = compose(h.laser_pose, base_from_laser)
+            out.append(h)
+        return out
+
+    def verify(self, h: Hypothesis, points: np.ndarray, angles: np.ndarray, beams: np.ndarray) -> None:
+        """Refine ``h`` on the wall surface, then ray-cast the query's beams from it."""
+        cfg = self.config
+        r = refine_pose(self._surface, points, h.laser_pose,
+                        iterations=cfg.refine_iterations if cfg.refine else 0)
+        h.laser_pose = r.pose
+        h.cost = r.cost
+        h.covariance = self._base_covariance(r.covariance, h.laser_pose)
+        h.pose = compose(h.laser_pose, inverse(cfg.laser_pose))
+        m = self.index.map
+        expected = cast_rays(self._occupied, m.resolution, m.origin, np.array([h.laser_pose]),
+                             angles, cfg.max_cast_range)[0]
+        h.check = check_beams(np.where(beams > cfg.max_cast_range, np.inf, beams), expected,
+                              tol=cfg.beam_tolerance)
+
+    def _base_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
+        """Propagate the laser-pose covariance to the base pose (first order)."""
+        lx, ly, _ = inverse(self.config.laser_pose)
+        c, s = np.cos(laser_pose[2]), np.sin(laser_pose[2])
+        off = (c * lx - s * ly, s * lx + c * ly)
+        jac = np.array([[1.0, 0.0, -off[1]], [0.0, 1.0, off[0]], [0.0, 0.0, 1.0]])
+        return jac @ cov_laser @ jac.T
+
+    def _localize(self, points: np.ndarray, angles: np.ndarray, beams: np.ndarray,
+                  t0: float) -> Localization:
+        cfg = self.config
+        if len(points) < cfg.min_points:
+            return self._failed(t0, f'too few valid points ({len(points)} < {cfg.min_points})')
+        try:
+            query = prepare_scan(points, self.matcher_config)
+        except ValueError as exc:
+            return self._failed(t0, f'bad scan: {exc}')
+        hyps = self.fine(query, self.coarse(query, self.prefilter(query)))
+        if not hyps:
+            return self._failed(t0, 'no candidate node gave a consistent match')
+        if cfg.paper_mode:
+            best = max(hyps, key=lambda h: h.vicinity)
+            return Localization(status='ok', pose=best.pose, node=best.node, score=best.vicinity,
+                                candidates=hyps, latency_ms=(time.perf_counter() - t0) * 1e3,
+                                message='paper mode: largest vicinity score')
+        for h in hyps:
+            self.verify(h, points, angles, beams)
+        hyps.sort(key=lambda h: (not h.plausible(cfg), h.cost))
+        best = hyps[0]
+        ms = (time.perf_counter() - t0) * 1e3
+        if not best.plausible(cfg):
+            return Localization(status='failed', pose=best.pose, node=best.node, score=best.score,
+                                candidates=hyps, latency_ms=ms,
+                                message=(f'no hypothesis agrees with the map (best: agree '
+                                         f'{best.check.consistent:.0%}, through walls '
+                                         f'{best.check.contradicting:.0%})'))
+        rivals = [h for h in hyps[1:] if h.plausible(cfg) and _distinct(h.pose, best.pose, cfg)
+                  and h.cost <= best.cost * cfg.ambiguity_ratio]
+        cov = best.covariance
+        if rivals:
+            status = 'ambiguous'
+            msg = f'{len(rivals) + 1} distinct poses fit about equally well'
+            spread = np.array([h.pose for h in rivals + [best]])
+            cov = cov + np.diag([*np.var(spread[:, :2], axis=0), np.pi ** 2 / 3.0])
+        else:
+            status = 'ok'
+            msg = (f'agree {best.check.consistent:.0%}, through walls '
+                   f'{best.check.contradicting:.0%}, rms {np.sqrt(best.cost) * 1e3:.0f} mm')
+        return Localization(status=status, pose=best.pose, covariance=cov, node=best.node,
+                            score=best.score, candidates=hyps, latency_ms=ms, message=msg)

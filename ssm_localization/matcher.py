@@ -1,0 +1,184 @@
+"""Spectral scan matching (paper section II): public API ``match_scans``.
+
+Pipeline: ``prepare_scan`` (downsample, tangents eq. 1, descriptors) -> tentative correspondences
+L (descriptor top-k) -> affinity G (eqs. 2-4) -> leading eigenvector + greedy binarization
+(eqs. 5-6) -> 2-point RANSAC + least squares (eqs. 7-8) -> optional point-to-line ICP.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .descriptors import candidates
+from .pairwise import affinity_matrix
+from .ransac import icp_point_to_line, mutual_nn_procrustes, ransac_pose
+from .scan import ScanFeatures, as_points, prepare_scan
+from .spectral import binarize, leading_eigenvector, matching_score
+
+__all__ = ['MatcherConfig', 'MatchResult', 'ScanFeatures', 'prepare_scan', 'match_scans',
+           'match_features', 'spectral_score']
+
+#: logistic weights w of eq. 4 learned by ``scripts/learn_weights.py`` (see its docstring)
+LEARNED_WEIGHTS = (3.0, -200.0, -12.5)
+#: hand-set weights: sigma_d = 50 mm, sigma_theta = 0.2 rad, w0 = 3
+HAND_WEIGHTS = (3.0, -200.0, -12.5)
+
+
+@dataclass(frozen=True)
+class MatcherConfig:
+    """Scan matcher settings (lengths in metres, angles in radians); defaults are tuned."""
+
+    # preprocessing (scan.py)
+    max_points: int = 120            # point budget after spatially even downsampling
+    min_spacing: float = 0.05        # smallest voxel side of the downsampling
+    context_spacing: float = 0.1     # voxel side of the context set (tangents, descriptors)
+    tangent_method: str = 'pca'      # 'pca' (robust, default) or 'eq1' (paper eq. 1 verbatim)
+    tangent_radius: float = 0.3      # PCA neighbourhood of the tangents
+    gap: float = 0.5                 # eq. 1 only: neighbour jump treated as a gap
+    # descriptors and tentative correspondences L (descriptors.py)
+    desc_radius: float = 2.0
+    desc_radial_bins: int = 4
+    desc_angular_bins: int = 8
+    k_candidates: int = 3            # reference candidates per new point
+    both_ways: bool = False          # also k new candidates per reference point
+    # affinity (eqs. 3-4) and its zeroing rules
+    weights: tuple[float, float, float] = LEARNED_WEIGHTS
+    max_dist_deform: float = 0.3     # |d_ij - d_i'j'| above this: G_ab = 0
+    max_angle_deform: float = 0.6    # |theta_ij - theta_i'j'| above this: G_ab = 0
+    # spectral solution (eqs. 5-6)
+    power_iterations: int = 40
+    power_tol: float = 1e-5
+    binarize_min_ratio: float = 0.0  # stop binarizing below this fraction of max x* (paper: 0)
+    # pose estimation (II.C)
+    ransac_iterations: int = 200
+    ransac_threshold: float = 0.15
+    ransac_min_span: float = 0.3
+    seed: int = 0
+    min_inliers: int = 6
+    # point-to-line ICP refinement (beyond the paper)
+    icp: bool = True
+    icp_iterations: int = 15
+    icp_max_dist: float = 0.3
+    icp_min_dist: float = 0.05
+    icp_max_points: int = 250        # budget of the denser point set used by ICP
+    icp_min_spacing: float = 0.0
+    normal_radius: float = 0.25      # PCA neighbourhood of the ICP normals
+    polish: bool = True              # after ICP: point-to-point LS on mutual nearest neighbours
+    polish_gate: float = 0.05
+    polish_iterations: int = 2
+
+    def __post_init__(self):
+        if self.max_points < 3:
+            raise ValueError('MatcherConfig.max_points must be >= 3')
+        if self.k_candidates < 1:
+            raise ValueError('MatcherConfig.k_candidates must be >= 1')
+        if self.tangent_method not in ('pca', 'eq1'):
+            raise ValueError("MatcherConfig.tangent_method must be 'pca' or 'eq1'")
+        if len(self.weights) != 3:
+            raise ValueError('MatcherConfig.weights must have 3 values (eq. 4)')
+        object.__setattr__(self, 'weights', tuple(float(v) for v in self.weights))
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """``pose`` (x, y, yaw): ``p_ref ~= R(yaw) @ p_new + (x, y)``; ``pairs`` (K, 2) consistent
+    correspondences (binarized eq. 6) as indices into the caller's ref / new arrays; ``score`` eq. 5
+    at that solution; ``inliers`` (K_in, 2) the pairs supporting the pose; ``ok`` whether the
+    estimate is trustworthy (enough inliers). ``pose`` is NaN when nothing could be estimated."""
+
+    pose: tuple[float, float, float]
+    pairs: np.ndarray
+    score: float
+    inliers: np.ndarray
+    ok: bool
+    n_candidates: int = 0
+    message: str = ''
+    rms: float = math.nan
+    extra: dict = field(default_factory=dict, compare=False, repr=False)
+
+
+def _empty(message: str, n_candidates: int = 0, score: float = 0.0,
+           pairs: np.ndarray | None = None) -> MatchResult:
+    z = np.zeros((0, 2), dtype=np.int64)
+    return MatchResult(pose=(math.nan, math.nan, math.nan), pairs=z if pairs is None else pairs,
+                       score=score, inliers=z, ok=False, n_candidates=n_candidates,
+                       message=message)
+
+
+def _spectral(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig):
+    """L, G, x*, the binarized selection (indices into L) and the score E."""
+    L = candidates(ref.descriptors, new.descriptors, config.k_candidates, config.both_ways)
+    if len(L) < 2:
+        return L, None, None, np.zeros(0, dtype=np.int64), 0.0
+    G = affinity_matrix(ref.dist, ref.angle, new.dist, new.angle, L, config.weights,
+                        config.max_dist_deform, config.max_angle_deform)
+    x = leading_eigenvector(G, config.power_iterations, config.power_tol)
+    sel = binarize(x, L, config.binarize_min_ratio)
+    return L, G, x, sel, matching_score(G, sel)
+
+
+def spectral_score(ref: ScanFeatures, new: ScanFeatures,
+                   config: MatcherConfig | None = None) -> tuple[float, np.ndarray]:
+    """Coarse stage: ``(E, pairs)`` with E = eq. 5 at the binarized eq. 6 solution and ``pairs``
+    (K, 2) indices into the callers' arrays (``source_index``). ``(0.0, empty)`` if degenerate."""
+    config = config or MatcherConfig()
+    if ref.is_degenerate or new.is_degenerate:
+        return 0.0, np.zeros((0, 2), dtype=np.int64)
+    L, _, _, sel, score = _spectral(ref, new, config)
+    q = L[sel]
+    return score, np.column_stack((ref.source_index[q[:, 0]], new.source_index[q[:, 1]]))
+
+
+def match_features(ref: ScanFeatures, new: ScanFeatures,
+                   config: MatcherConfig | None = None) -> MatchResult:
+    """Match two prepared scans; never raises on degenerate input (returns ``ok=False``)."""
+    config = config or MatcherConfig()
+    if ref.is_degenerate or new.is_degenerate:
+        return _empty('degenerate scan (fewer than 3 points or collinear)')
+    L, G, x, sel, score = _spectral(ref, new, config)
+    q = L[sel]
+    pairs = np.column_stack((ref.source_index[q[:, 0]], new.source_index[q[:, 1]]))
+    if len(q) < 2:
+        return _empty('too few consistent correspondences', len(L), score, pairs)
+    rp = ref.points[q[:, 0]]
+    npts = new.points[q[:, 1]]
+    rng = np.random.default_rng(config.seed)
+    pose, mask = ransac_pose(rp, npts, config.ransac_threshold, config.ransac_iterations, rng,
+                             config.ransac_min_span)
+    if pose is None:
+        return _empty('RANSAC found no pose', len(L), score, pairs)
+    rms = math.nan
+    if config.icp:
+        pose, _, rms = icp_point_to_line(ref.fine_points, ref.fine_normals, new.fine_points,
+                                         pose, config.icp_iterations, config.icp_max_dist,
+                                         config.icp_min_dist, ref_weights=ref.fine_weights,
+                                         tree=ref.fine_tree)
+        if config.polish:
+            pose, _ = mutual_nn_procrustes(ref.fine_points, new.fine_points, pose,
+                                           config.polish_gate, config.polish_iterations,
+                                           ref.fine_tree, new.fine_tree)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        moved = npts @ np.array([[c, s], [-s, c]]) + np.array(pose[:2])
+        mask2 = np.linalg.norm(rp - moved, axis=1) < config.ransac_threshold
+        if mask2.sum() >= mask.sum() // 2:
+            mask = mask2
+    inliers = pairs[mask]
+    ok = bool(len(inliers) >= config.min_inliers)
+    return MatchResult(pose=(float(pose[0]), float(pose[1]), float(pose[2])), pairs=pairs,
+                       score=score, inliers=inliers, ok=ok, n_candidates=len(L),
+                       message='' if ok else f'only {len(inliers)} inliers', rms=rms)
+
+
+def match_scans(ref_xy, new_xy, config: MatcherConfig | None = None) -> MatchResult:
+    """Pose of the new scan in the reference scan's frame: ``p_ref ~= R(yaw) @ p_new + (x, y)``.
+
+    ``ref_xy`` (N, 2) and ``new_xy`` (M, 2): points in scan order, metres. Raises ``ValueError``
+    for arrays that are not (N, 2); fewer than 3 finite points, all-invalid or collinear scans
+    give a ``MatchResult`` with ``ok=False`` and a NaN pose.
+    """
+    config = config or MatcherConfig()
+    ref = prepare_scan(as_points(ref_xy, 'ref_xy'), config)
+    new = prepare_scan(as_points(new_xy, 'new_xy'), config)
+    return match_features(ref, new, config)

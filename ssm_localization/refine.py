@@ -1,0 +1,191 @@
+"""Pose refinement and verification against the map itself (beyond the paper).
+
+The paper stops at the RANSAC pose relative to a node's virtual scan, so its accuracy is bounded
+by the virtual scan's sampling. Here the winning hypotheses are refined by Gauss-Newton on the
+signed distance of the scan endpoints to the map's wall surface and checked by ray casting.
+
+Where the wall surface lies is an explicit model choice (``surface_depth``, in cells):
+- ``0.0``: at the boundary of the occupied cells. Right for scans ray-cast on the same grid
+  (the paper's Table 1 simulation stops at the first occupied cell's boundary).
+- ``0.5``: through the centres of the occupied cells. Right for real scans on maps built from real
+  scans, where beams end anywhere inside a wall cell and the cell was marked where beams ended.
+Using the wrong one costs about half a cell of accuracy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from .transforms import Pose2, rotation, wrap_angle
+
+
+_NEIGHBOURHOOD = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
+
+
+@dataclass(frozen=True)
+class SurfaceModel:
+    """Exact signed distance to the boundary of occupied cells, shifted by ``depth`` metres.
+
+    For every cell the nearest occupied cell (for free cells) or nearest non-occupied cell (for
+    occupied cells) is precomputed once per map (EDT indices); a query then costs one table look-up
+    and a point-to-box distance per point, with an exact gradient.
+    """
+
+    origin: Pose2
+    resolution: float
+    occupied: np.ndarray        # (H, W) bool
+    nearest_occ: np.ndarray     # (2, H, W) int32 row/col of the nearest occupied cell
+    nearest_free: np.ndarray    # (2, H, W) int32 row/col of the nearest non-occupied cell
+    depth: float                # metres behind the occupied-cell boundary where the surface lies
+
+    @classmethod
+    def from_occupancy(cls, occupied: np.ndarray, resolution: float, origin: Pose2,
+                       surface_depth_cells: float = 0.5) -> 'SurfaceModel':
+        occupied = np.asarray(occupied, dtype=bool)
+        if not occupied.any():
+            raise ValueError('map has no occupied cells: nothing to refine against')
+        _, i_occ = ndimage.distance_transform_edt(~occupied, return_indices=True)
+        if occupied.all():
+            i_free = np.zeros_like(i_occ)
+        else:
+            _, i_free = ndimage.distance_transform_edt(occupied, return_indices=True)
+        return cls(origin=tuple(float(v) for v in origin), resolution=float(resolution),
+                   occupied=occupied, nearest_occ=i_occ.astype(np.int32),
+                   nearest_free=i_free.astype(np.int32),
+                   depth=float(surface_depth_cells) * float(resolution))
+
+    def signed_distance(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Signed distance (m) of map-frame points to the wall surface, its gradient, validity.
+
+        Positive in free space, negative inside walls; points off the grid are invalid.
+        """
+        ox, oy, oyaw = self.origin
+        rot = rotation(oyaw)
+        g = (np.asarray(pts, float) - (ox, oy)) @ rot / self.resolution  # grid units, (col, row)
+        h, w = self.occupied.shape
+        col = np.floor(g[:, 0]).astype(np.int64)
+        row = np.floor(g[:, 1]).astype(np.int64)
+        valid = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        s = np.zeros(len(g))
+        grad = np.zeros((len(g), 2))
+        if not valid.any():
+            return s, grad, valid
+        r, c, gv = row[valid], col[valid], g[valid]
+        inside = self.occupied[r, c]
+        # The nearest box is the nearest-centre cell of this cell or of one of its 8 neighbours.
+        best = np.full(len(gv), np.inf)
+        diff = np.zeros_like(gv)
+        for dr, dc in _NEIGHBOURHOOD:
+            rr, cc = np.clip(r + dr, 0, h - 1), np.clip(c + dc, 0, w - 1)
+            near = np.where(inside, self.nearest_free[:, rr, cc], self.nearest_occ[:, rr, cc])
+            box_lo = np.column_stack((near[1], near[0])).astype(float)
+            d = gv - np.clip(gv, box_lo, box_lo + 1.0)   # from the box's closest point to gv
+            dd = np.hypot(d[:, 0], d[:, 1])
+            better = dd < best
+            best = np.where(better, dd, best)
+            diff[better] = d[better]
+        dist = best
+        unit = np.divide(diff, dist[:, None], out=np.zeros_like(diff), where=dist[:, None] > 0)
+        sign = np.where(inside, -1.0, 1.0)
+        # inside a wall the distance is to the nearest free box and grows away from it
+        s[valid] = sign * dist * self.resolution + self.depth
+        grad[valid] = (sign[:, None] * unit) @ rot.T
+        return s, grad, valid
+
+
+@dataclass(frozen=True)
+class RefineResult:
+    pose: Pose2                 # refined laser pose in the map frame
+    covariance: np.ndarray      # (3, 3) of (x, y, yaw)
+    rms: float                  # robust RMS of the surface residuals of the inliers, metres
+    inlier_fraction: float      # endpoints within ``inlier_distance`` of the surface
+    cost: float                 # mean truncated squared residual min(r^2, d_in^2) of all endpoints
+    iterations: int
+
+
+def refine_pose(surface: SurfaceModel, points: np.ndarray, pose: Pose2, *,
+                iterations: int = 12, huber: float = 0.03, truncate: tuple[float, float] = (0.3, 0.1),
+                inlier_distance: float = 0.1, min_sigma: float = 0.005) -> RefineResult:
+    """Gauss-Newton on ``sum rho(sdf(R p + t))`` over the laser pose (robust, truncated).
+
+    The truncation radius shrinks from ``truncate[0]`` to ``truncate[1]`` so clutter and unmapped
+    objects drop out; Huber weights soften the rest. The covariance is ``sigma^2 (J^T W J)^-1``.
+    """
+    pts = np.asarray(points, float)
+    x = np.array(pose, float)
+    jtj = np.eye(3)
+    sigma2 = min_sigma ** 2
+    it = 0
+    for it in range(1, iterations + 1):
+        trunc = truncate[0] + (truncate[1] - truncate[0]) * min(1.0, (it - 1) / max(iterations // 2, 1))
+        rot = rotation(x[2])
+        world = pts @ rot.T + x[:2]
+        r, g, valid = surface.signed_distance(world)
+        use = valid & (np.abs(r) < trunc)
+        if use.sum() < 3:
+            break
+        rel = world[use] - x[:2]
+        jac = np.column_stack((g[use], g[use, 0] * -rel[:, 1] + g[use, 1] * rel[:, 0]))
+        ru = r[use]
+        absr = np.abs(ru)
+        wts = np.where(absr <= huber, 1.0, huber / np.maximum(absr, 1e-12))
+        jtj = (jac * wts[:, None]).T @ jac
+        jtr = (jac * wts[:, None]).T @ ru
+        try:
+            step = -np.linalg.solve(jtj + 1e-9 * np.eye(3), jtr)
+        except np.linalg.LinAlgError:
+            break
+        x += step
+        x[2] = wrap_angle(x[2])
+        sigma2 = max(float(np.sum(wts * ru ** 2) / max(use.sum() - 3, 1)), min_sigma ** 2)
+        if np.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
+            break
+    rot = rotation(x[2])
+    r, _, valid = surface.signed_distance(pts @ rot.T + x[:2])
+    inl = valid & (np.abs(r) < inlier_distance)
+    try:
+        cov = sigma2 * np.linalg.inv(jtj)
+    except np.linalg.LinAlgError:
+        cov = np.diag([1e3, 1e3, 1e3])
+    rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float('inf')
+    cost = float(np.mean(np.where(inl, r ** 2, inlier_distance ** 2))) if len(pts) else float('inf')
+    return RefineResult(pose=(float(x[0]), float(x[1]), float(x[2])), covariance=cov, rms=rms,
+                        inlier_fraction=float(inl.mean()) if len(pts) else 0.0, cost=cost,
+                        iterations=it)
+
+
+@dataclass(frozen=True)
+class BeamCheck:
+    """Ray-cast agreement of a scan with the map at a pose (fractions of the valid beams)."""
+
+    consistent: float     # |z - z_map| < tol
+    contradicting: float  # z > z_map + tol: the beam went through a wall
+    short: float          # z < z_map - tol: unmapped object (clutter), neither good nor bad
+
+    @property
+    def score(self) -> float:
+        return self.consistent - 2.0 * self.contradicting
+
+
+def check_beams(measured: np.ndarray, expected: np.ndarray, tol: float = 0.15,
+                rel_tol: float = 0.02) -> BeamCheck:
+    """Compare measured ranges with ranges ray-cast on the map (``inf`` = no return / no hit).
+
+    Beams with no return where the map expects none are consistent; a no-return where the map has
+    a wall counts as neither (glass, dark surfaces), so only solid evidence contradicts a pose.
+    """
+    z = np.asarray(measured, float)
+    e = np.asarray(expected, float)
+    n = max(len(z), 1)
+    zf, ef = np.isfinite(z), np.isfinite(e)
+    both = zf & ef
+    t = tol + rel_tol * np.where(both, e, 0.0)
+    with np.errstate(invalid='ignore'):
+        diff = np.where(both, z - e, 0.0)
+    consistent = (both & (np.abs(diff) < t)) | (~zf & ~ef)
+    contradicting = (both & (diff >= t)) | (zf & ~ef)
+    short = both & (diff <= -t)
+    return BeamCheck(consistent=float(consistent.sum() / n),
+                     contradicting=float(contradicting.sum() / n), short=float(short.sum() / n))

@@ -1,0 +1,150 @@
+"""Offline replay: localize every scan of a bag on its own and score it against /ground_truth."""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .localizer import GlobalLocalizer, Localization
+from .progress import ProgressBar
+from .transforms import Pose2, wrap_angle
+
+#: success: status ok and within these bounds of the ground truth (the issue's definition)
+SUCCESS_XY = 0.5
+SUCCESS_YAW = math.radians(5.0)
+
+
+@dataclass
+class ResultRow:
+    """One RESULTS.csv row (INTERFACES.md); ground-truth columns are NaN when there is none."""
+
+    stamp: float
+    x: float
+    y: float
+    yaw: float
+    status: str
+    latency_ms: float
+    node: int
+    score: float
+    gt_x: float = math.nan
+    gt_y: float = math.nan
+    gt_yaw: float = math.nan
+
+    @classmethod
+    def from_localization(cls, stamp: float, loc: Localization, truth: Pose2 | None) -> 'ResultRow':
+        pose = loc.pose if loc.pose is not None else (math.nan, math.nan, math.nan)
+        gt = truth if truth is not None else (math.nan, math.nan, math.nan)
+        return cls(stamp=stamp, x=pose[0], y=pose[1], yaw=pose[2], status=loc.status,
+                   latency_ms=loc.latency_ms, node=loc.node, score=loc.score,
+                   gt_x=gt[0], gt_y=gt[1], gt_yaw=gt[2])
+
+    @property
+    def has_truth(self) -> bool:
+        return not math.isnan(self.gt_x)
+
+    def errors(self) -> tuple[float, float, float]:
+        """|dx|, |dy| (m) and |dyaw| (rad) against the ground truth (NaN if unknown)."""
+        return (abs(self.x - self.gt_x), abs(self.y - self.gt_y),
+                abs(float(wrap_angle(self.yaw - self.gt_yaw))))
+
+    @property
+    def correct(self) -> bool:
+        ex, ey, eyaw = self.errors()
+        return bool(math.hypot(ex, ey) <= SUCCESS_XY and eyaw <= SUCCESS_YAW)
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Figures for a set of localized scans with ground truth."""
+
+    n: int
+    ok: int
+    ambiguous: int
+    failed: int
+    success_rate: float          # status ok and correct, over all scans
+    precision: float             # correct over answered ok
+    median_xy_mm: float          # Euclidean position error of the ok answers
+    median_x_mm: float
+    median_y_mm: float
+    median_yaw_deg: float
+    mean_x_mm: float
+    mean_y_mm: float
+    mean_yaw_deg: float
+    latency_p50_ms: float
+    latency_p95_ms: float
+
+    def format(self, title: str = '') -> str:
+        head = f'{title}: ' if title else ''
+        return (f'{head}n={self.n} ok={self.ok} ambiguous={self.ambiguous} failed={self.failed} | '
+                f'success {self.success_rate:.1%} precision {self.precision:.1%} | median error '
+                f'{self.median_x_mm:.1f} / {self.median_y_mm:.1f} mm, {self.median_yaw_deg:.2f} deg '
+                f'(xy {self.median_xy_mm:.1f} mm) | mean {self.mean_x_mm:.1f} / {self.mean_y_mm:.1f} mm, '
+                f'{self.mean_yaw_deg:.2f} deg | latency p50 {self.latency_p50_ms:.0f} ms '
+                f'p95 {self.latency_p95_ms:.0f} ms')
+
+
+def summarize(rows: Sequence[ResultRow]) -> Summary:
+    """Success rate, precision, error and latency figures (rows without truth are skipped)."""
+    rows = [r for r in rows if r.has_truth]
+    if not rows:
+        raise ValueError('no scan with ground truth to score')
+    ok = [r for r in rows if r.status == 'ok']
+    correct = [r for r in ok if r.correct]
+    err = np.array([r.errors() for r in ok]) if ok else np.full((1, 3), np.nan)
+    lat = np.array([r.latency_ms for r in rows])
+    nan_med = (lambda a: float(np.median(a))) if ok else (lambda a: math.nan)
+    nan_mean = (lambda a: float(np.mean(a))) if ok else (lambda a: math.nan)
+    return Summary(
+        n=len(rows), ok=len(ok), ambiguous=sum(r.status == 'ambiguous' for r in rows),
+        failed=sum(r.status == 'failed' for r in rows),
+        success_rate=len(correct) / len(rows),
+        precision=len(correct) / len(ok) if ok else math.nan,
+        median_xy_mm=nan_med(np.hypot(err[:, 0], err[:, 1])) * 1e3,
+        median_x_mm=nan_med(err[:, 0]) * 1e3, median_y_mm=nan_med(err[:, 1]) * 1e3,
+        median_yaw_deg=math.degrees(nan_med(err[:, 2])),
+        mean_x_mm=nan_mean(err[:, 0]) * 1e3, mean_y_mm=nan_mean(err[:, 1]) * 1e3,
+        mean_yaw_deg=math.degrees(nan_mean(err[:, 2])),
+        latency_p50_ms=float(np.percentile(lat, 50)), latency_p95_ms=float(np.percentile(lat, 95)))
+
+
+def write_results_csv(rows: Iterable[ResultRow], path: str | Path) -> None:
+    """RESULTS.csv: the INTERFACES.md columns first, ground truth after."""
+    names = [f.name for f in fields(ResultRow)]
+    with open(path, 'w', newline='') as fh:
+        w = csv.DictWriter(fh, fieldnames=names)
+        w.writeheader()
+        for r in rows:
+            d = asdict(r)
+            w.writerow({k: ('' if isinstance(v, float) and math.isnan(v) and k in ('x', 'y', 'yaw')
+                            else v) for k, v in d.items()})
+
+
+def match_truth(stamps: np.ndarray, truth: dict[float, Pose2], tol: float = 1e-3) -> list[Pose2 | None]:
+    """The ground-truth pose with the same stamp (within ``tol`` s) as each scan, else None."""
+    if not truth:
+        return [None] * len(stamps)
+    keys = np.array(sorted(truth))
+    out: list[Pose2 | None] = []
+    for s in stamps:
+        i = int(np.clip(np.searchsorted(keys, s), 1, len(keys) - 1)) if len(keys) > 1 else 0
+        j = min((i - 1, i) if len(keys) > 1 else (0,), key=lambda k: abs(keys[k] - s))
+        out.append(truth[float(keys[j])] if abs(keys[j] - s) <= tol else None)
+    return out
+
+
+def replay_scans(localizer: GlobalLocalizer, scans: Sequence, truth: dict[float, Pose2] | None = None,
+                 progress: bool = True) -> list[ResultRow]:
+    """Localize each ScanRecord on its own (no tracking, no odometry)."""
+    truths = match_truth(np.array([s.stamp for s in scans]), truth or {})
+    bar = ProgressBar(len(scans), 'replay', enabled=progress)
+    rows = []
+    for i, (scan, gt) in enumerate(zip(scans, truths)):
+        loc = localizer.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                                      scan.range_min, scan.range_max)
+        rows.append(ResultRow.from_localization(scan.stamp, loc, gt))
+        bar.update(i + 1)
+    return rows

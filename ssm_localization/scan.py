@@ -1,0 +1,349 @@
+"""Scan preprocessing for spectral scan matching (paper section II.A).
+
+ranges -> points (``ranges_to_points``), spatially even downsampling to a point budget
+(``downsample_even``), tangents (eq. 1, ``tangents``) and the per-scan features the matcher
+precomputes once (``ScanFeatures``, ``prepare_scan``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .matcher import MatcherConfig
+
+
+def ranges_to_points(ranges, angle_min: float, angle_increment: float, range_min: float = 0.0,
+                     range_max: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
+    """Convert LaserScan ranges to ``(points (N, 2), index (N,))`` in the laser frame.
+
+    Beam ``b`` is at ``angle_min + b * angle_increment`` (negative increments allowed). Drops
+    NaN, +-inf, non-positive readings and readings outside ``[range_min, range_max]``. Points are
+    returned in counterclockwise sweep order (increasing beam angle, i.e. reversed for a negative
+    increment) so that tangents (eq. 1) have the same orientation for every scanner; ``index``
+    holds the beam index of each point in ``ranges``.
+    """
+    r = np.asarray(ranges, dtype=float)
+    if r.ndim != 1:
+        raise ValueError(f'ranges: expected a 1-D array, got shape {r.shape}')
+    if not (math.isfinite(angle_min) and math.isfinite(angle_increment)):
+        raise ValueError('angle_min / angle_increment must be finite')
+    if angle_increment == 0.0 and r.size > 1:
+        raise ValueError('angle_increment must not be 0')
+    idx = np.arange(r.size)
+    with np.errstate(invalid='ignore'):
+        ok = np.isfinite(r) & (r > 0.0) & (r >= range_min) & (r <= range_max)
+    idx = idx[ok]
+    if angle_increment < 0.0:
+        idx = idx[::-1]
+    a = angle_min + angle_increment * idx
+    rr = r[idx]
+    pts = np.column_stack((rr * np.cos(a), rr * np.sin(a)))
+    return pts, idx
+
+
+def sweep_direction(points: np.ndarray) -> float:
+    """+1 if the points sweep counterclockwise about the origin in array order, else -1.
+
+    Majority vote over consecutive points less than 0.2 rad apart in bearing, so jumps and
+    outliers interleaved in scan order do not flip it.
+    """
+    if len(points) < 2:
+        return 1.0
+    a, b = points[:-1], points[1:]
+    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    dot = (a * b).sum(axis=1)
+    da = np.arctan2(cross, dot)
+    small = np.abs(da) < 0.2
+    votes = np.sign(da[small]).sum() if small.any() else np.sign(da).sum()
+    return 1.0 if votes >= 0.0 else -1.0
+
+
+def _voxel_select(points: np.ndarray, cell: float) -> np.ndarray:
+    """One point per occupied square cell of side ``cell`` (the one nearest the cell's centroid),
+    returned as ascending indices (scan order kept)."""
+    key = np.floor(points / cell).astype(np.int64)
+    key -= key.min(axis=0)
+    code = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
+    _, inv = np.unique(code, return_inverse=True)
+    inv = inv.ravel()
+    cnt = np.bincount(inv)
+    cx = np.bincount(inv, points[:, 0]) / cnt
+    cy = np.bincount(inv, points[:, 1]) / cnt
+    d = (points[:, 0] - cx[inv]) ** 2 + (points[:, 1] - cy[inv]) ** 2
+    order = np.lexsort((d, inv))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = inv[order[1:]] != inv[order[:-1]]
+    return np.sort(order[first])
+
+
+def downsample_even(points: np.ndarray, budget: int, min_spacing: float = 0.0) -> np.ndarray:
+    """Indices (ascending: scan order kept) of at most ``budget`` spatially even points.
+
+    Voxel-grid selection (one point per cell, nearest the cell centroid) with cell side
+    ``min_spacing``, grown until at most ``budget`` cells are occupied. Unlike a walk along the
+    scan, it is not fooled by outliers interleaved in scan order or by range noise.
+    """
+    n = len(points)
+    budget = max(int(budget), 1)
+    if n == 0 or (n <= budget and min_spacing <= 0.0):
+        return np.arange(n)
+    ext = float(np.ptp(points, axis=0).max())
+    if ext <= 0.0:
+        return np.arange(min(n, 1))
+    # first guess: polyline length (chords of every 3rd point, jumps capped) / budget
+    steps = np.linalg.norm(np.diff(points[::3], axis=0), axis=1)
+    length = float(np.minimum(steps, 0.5).sum())
+    cell = max(min_spacing, 0.9 * length / budget, ext * 1e-4)
+    sel = _voxel_select(points, cell)
+    for _ in range(12):
+        if len(sel) <= budget:
+            return sel
+        cell *= 1.03 * len(sel) / budget
+        sel = _voxel_select(points, cell)
+    return sel[np.round(np.linspace(0, len(sel) - 1, budget)).astype(int)]
+
+
+def tangents(points: np.ndarray, gap: float, direction: float = 1.0) -> np.ndarray:
+    """Unit tangents ``u_i = (p_{i+1} - p_{i-1}) / ||.||`` (eq. 1), shape (N, 2).
+
+    A neighbour farther than ``gap`` (a jump to another surface) is replaced by the point itself
+    (one-sided difference), as are the missing neighbours at the scan ends. A point isolated on
+    both sides gets the sweep direction ``(-y, x)/|p|``. ``direction=-1`` flips all tangents (for
+    clockwise sweeps) so that they always follow the counterclockwise sweep.
+    """
+    p = np.asarray(points, dtype=float)
+    n = len(p)
+    if n == 0:
+        return np.zeros((0, 2))
+    nxt = np.vstack((p[1:], p[-1:]))
+    prv = np.vstack((p[:1], p[:-1]))
+    jn = np.linalg.norm(nxt - p, axis=1) > gap
+    jp = np.linalg.norm(p - prv, axis=1) > gap
+    nxt[jn] = p[jn]
+    prv[jp] = p[jp]
+    u = nxt - prv
+    norm = np.linalg.norm(u, axis=1)
+    bad = norm < 1e-9
+    if bad.any():
+        sweep = np.column_stack((-p[bad, 1], p[bad, 0]))
+        sn = np.linalg.norm(sweep, axis=1)
+        sweep[sn < 1e-12] = (1.0, 0.0)
+        u[bad] = sweep
+        norm[bad] = np.linalg.norm(u[bad], axis=1)
+    return direction * u / norm[:, None]
+
+
+def local_normals(points: np.ndarray, radius: float, half_window: int = 4
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals (N, 2) by PCA of the scan-order neighbours within ``radius`` and weights (N,).
+
+    Neighbours are taken among the ``half_window`` points on each side (scan order) that lie
+    within ``radius``, so normals do not bridge gaps. The weight ``1 - l_min / l_max`` (1 on a
+    straight wall, ~0 at corners or for isolated points) lets ICP ignore ill-defined normals.
+    """
+    p = np.asarray(points, dtype=float)
+    n = len(p)
+    if n == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    sxx = np.zeros(n)
+    sxy = np.zeros(n)
+    syy = np.zeros(n)
+    sx = np.zeros(n)
+    sy = np.zeros(n)
+    cnt = np.zeros(n)
+    for k in range(-half_window, half_window + 1):
+        lo, hi = max(0, -k), min(n, n - k)       # i in [lo, hi) has neighbour i + k
+        q = p[lo + k:hi + k]
+        ok = np.linalg.norm(q - p[lo:hi], axis=1) <= radius
+        x = np.where(ok, q[:, 0] - p[lo:hi, 0], 0.0)
+        y = np.where(ok, q[:, 1] - p[lo:hi, 1], 0.0)
+        cnt[lo:hi] += ok
+        sx[lo:hi] += x
+        sy[lo:hi] += y
+        sxx[lo:hi] += x * x
+        sxy[lo:hi] += x * y
+        syy[lo:hi] += y * y
+    mx, my = sx / cnt, sy / cnt
+    cxx = sxx / cnt - mx * mx
+    cxy = sxy / cnt - mx * my
+    cyy = syy / cnt - my * my
+    tr = cxx + cyy
+    disc = np.sqrt(np.maximum((cxx - cyy) ** 2 / 4.0 + cxy * cxy, 0.0))
+    lmax = tr / 2.0 + disc
+    lmin = np.maximum(tr / 2.0 - disc, 0.0)
+    # eigenvector of lmax (the line direction), then its normal
+    tx = np.where(np.abs(cxy) > 1e-15, lmax - cyy, np.where(cxx >= cyy, 1.0, 0.0))
+    ty = np.where(np.abs(cxy) > 1e-15, cxy, np.where(cxx >= cyy, 0.0, 1.0))
+    tn = np.hypot(tx, ty)
+    tn[tn == 0.0] = 1.0
+    normals = np.column_stack((-ty / tn, tx / tn))
+    w = np.where((cnt >= 3) & (lmax > 0.0), 1.0 - lmin / np.where(lmax > 0.0, lmax, 1.0), 0.0)
+    return normals, w
+
+
+def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
+                    direction: float = 1.0, offsets=None) -> np.ndarray:
+    """Unit tangents (N, 2) at ``points`` from a PCA of the ``context`` points within ``radius``.
+
+    The noise- and outlier-robust form of eq. 1 used by default: the principal direction of the
+    neighbourhood, oriented like ``p_{i+1} - p_{i-1}`` would be for a counterclockwise sweep
+    (``cross(p_i, u_i) >= 0``; flipped for ``direction=-1``). Needs the sensor at the origin of
+    the points' frame, as scans are. Points with fewer than 2 neighbours get the sweep direction.
+    ``offsets`` may pass precomputed ``(dx, dy)`` = context - points, each (N, C).
+    """
+    p = np.asarray(points, dtype=float)
+    n = len(p)
+    if n == 0:
+        return np.zeros((0, 2))
+    if offsets is None:
+        dx = context[None, :, 0] - p[:, None, 0]
+        dy = context[None, :, 1] - p[:, None, 1]
+    else:
+        dx, dy = offsets
+    m = (dx * dx + dy * dy < radius * radius).astype(float)
+    cnt = m.sum(axis=1)
+    c = np.maximum(cnt, 1.0)
+    mx = (m * dx).sum(axis=1) / c
+    my = (m * dy).sum(axis=1) / c
+    cxx = (m * dx * dx).sum(axis=1) / c - mx * mx
+    cxy = (m * dx * dy).sum(axis=1) / c - mx * my
+    cyy = (m * dy * dy).sum(axis=1) / c - my * my
+    # principal direction: angle 0.5 * atan2(2 cxy, cxx - cyy)
+    phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
+    u = np.column_stack((np.cos(phi), np.sin(phi)))
+    sweep = np.column_stack((-p[:, 1], p[:, 0]))
+    bad = (cnt < 2) | ((cxx + cyy) <= 0.0)
+    sn = np.linalg.norm(sweep, axis=1)
+    sweep = np.where(sn[:, None] > 1e-12, sweep / np.maximum(sn, 1e-12)[:, None], (1.0, 0.0))
+    u[bad] = sweep[bad]
+    flip = (p[:, 0] * u[:, 1] - p[:, 1] * u[:, 0]) * direction < 0.0
+    u[flip] *= -1.0
+    return u
+
+
+@dataclass(frozen=True, eq=False)
+class ScanFeatures:
+    """What the matcher needs of one scan; plain numpy arrays (npz-friendly, no pickle).
+
+    ``points (N, 2)`` the downsampled points (scan frame), ``tangents (N, 2)`` (eq. 1),
+    ``descriptors (N, D)`` (rotation-invariant local descriptors, ``descriptors.py``),
+    ``source_index (N,)`` indices into the caller's point array; for the ICP refinement a denser
+    set ``fine_points (P, 2)`` with PCA ``fine_normals (P, 2)`` and ``fine_weights (P,)``. The
+    pairwise tables of eq. 2 (``dist``, ``angle``) are rebuilt lazily on first use and cached
+    (not stored).
+    """
+
+    points: np.ndarray
+    tangents: np.ndarray
+    descriptors: np.ndarray
+    source_index: np.ndarray
+    fine_points: np.ndarray
+    fine_normals: np.ndarray
+    fine_weights: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @property
+    def normals(self) -> np.ndarray:
+        """Left normals of the tangents (towards the sensor for a counterclockwise sweep)."""
+        return np.column_stack((-self.tangents[:, 1], self.tangents[:, 0]))
+
+    @cached_property
+    def is_degenerate(self) -> bool:
+        """Fewer than 3 points or (nearly) collinear points: the pose is not observable."""
+        if len(self.points) < 3:
+            return True
+        c = self.points - self.points.mean(axis=0)
+        s = np.linalg.svd(c, compute_uv=False)
+        return bool(s[1] < 1e-3 * max(s[0], 1e-12) or s[1] / math.sqrt(len(c)) < 1e-3)
+
+    @cached_property
+    def dist(self) -> np.ndarray:
+        """``d_ij`` of eq. 2, (N, N) float32."""
+        from .pairwise import distance_table
+        return distance_table(self.points)
+
+    @cached_property
+    def angle(self) -> np.ndarray:
+        """``theta_ij = arccos(u_i . u_j)`` of eq. 2, (N, N) float32."""
+        from .pairwise import angle_table
+        return angle_table(self.tangents)
+
+    @cached_property
+    def fine_tree(self):
+        """k-d tree (scipy ``cKDTree``) over ``fine_points`` for ICP, built on first use."""
+        from scipy.spatial import cKDTree
+        return cKDTree(self.fine_points)
+
+    def to_arrays(self, prefix: str = '') -> dict[str, np.ndarray]:
+        """The stored fields as ``{prefix + name: array}`` (for ``np.savez``)."""
+        return {prefix + f.name: np.asarray(getattr(self, f.name)) for f in fields(self)}
+
+    @classmethod
+    def from_arrays(cls, arrays, prefix: str = '') -> 'ScanFeatures':
+        """Inverse of ``to_arrays``; ``arrays`` is any mapping (e.g. an ``np.load`` result)."""
+        try:
+            vals = {f.name: np.asarray(arrays[prefix + f.name]) for f in fields(cls)}
+        except KeyError as exc:
+            raise ValueError(f'ScanFeatures: missing array {exc}') from None
+        n = len(vals['points'])
+        nf = len(vals['fine_points'])
+        if vals['points'].shape != (n, 2) or vals['tangents'].shape != (n, 2) \
+                or len(vals['descriptors']) != n or vals['source_index'].shape != (n,) \
+                or vals['fine_points'].shape != (nf, 2) or vals['fine_normals'].shape != (nf, 2) \
+                or vals['fine_weights'].shape != (nf,):
+            raise ValueError('ScanFeatures: inconsistent array shapes')
+        for name in ('points', 'tangents', 'fine_points', 'fine_normals', 'fine_weights'):
+            vals[name] = vals[name].astype(float)
+        vals['source_index'] = vals['source_index'].astype(np.int64)
+        return cls(**vals)
+
+
+def as_points(points_xy, name: str = 'points') -> np.ndarray:
+    """Validate an (N, 2) array-like; raises ``ValueError`` naming ``name`` otherwise."""
+    p = np.asarray(points_xy, dtype=float)
+    if p.size == 0:
+        return np.zeros((0, 2))
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f'{name}: expected an (N, 2) array, got shape {p.shape}')
+    return p
+
+
+def prepare_scan(points_xy, config: 'MatcherConfig | None' = None) -> ScanFeatures:
+    """Downsample, tangents (eq. 1) and descriptors of one scan (points in scan order, metres,
+    sensor at the origin).
+
+    Non-finite points are dropped; fewer than 3 points give features with ``is_degenerate``
+    (the matcher then returns an empty result). Three spatially even subsets are taken: the
+    matching points (``config.max_points``), a context set (``config.context_spacing``) for
+    tangents and descriptors, and the denser ICP set (``config.icp_max_points``).
+    """
+    from .descriptors import shape_context
+    if config is None:
+        from .matcher import MatcherConfig
+        config = MatcherConfig()
+    p = as_points(points_xy)
+    src = np.flatnonzero(np.isfinite(p).all(axis=1))
+    p = p[src]
+    direction = sweep_direction(p)
+    keep = downsample_even(p, config.max_points, config.min_spacing)
+    pts = p[keep]
+    src = src[keep]
+    ctx = p[downsample_even(p, 4 * config.max_points, config.context_spacing)]
+    offsets = (ctx[None, :, 0] - pts[:, None, 0], ctx[None, :, 1] - pts[:, None, 1])
+    if config.tangent_method == 'eq1':
+        u = tangents(pts, config.gap, direction)
+    else:
+        u = robust_tangents(pts, ctx, config.tangent_radius, direction, offsets)
+    desc = shape_context(pts, u, config.desc_radius, config.desc_radial_bins,
+                         config.desc_angular_bins, context=ctx, offsets=offsets)
+    fine = p[downsample_even(p, config.icp_max_points, config.icp_min_spacing)]
+    fn, fw = local_normals(fine, config.normal_radius)
+    return ScanFeatures(points=pts, tangents=u, descriptors=desc, source_index=src,
+                        fine_points=fine, fine_normals=fn, fine_weights=fw)

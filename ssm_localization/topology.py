@@ -1,0 +1,453 @@
+"""Topological map of a grid map: brushfire distance, GVD and nodes (paper section III).
+
+Algorithm (all vectorized numpy/scipy):
+
+1. Brushfire: the Euclidean distance transform (``scipy.ndimage.distance_transform_edt``) of the
+   free space gives every free cell its distance to the nearest obstacle cell (unknown cells and
+   the outside of the map count as obstacles) and *which* obstacle cell that is (feature
+   transform). Cells closer than ``min_clearance`` (the robot radius) are not traversable, so
+   passages narrower than twice that are ignored.
+2. GVD: a traversable cell is on the generalized Voronoi diagram when it and a neighbour have
+   nearest obstacle cells far apart, i.e. it is equidistant to two distinct obstacle points
+   (feature separation ``> ridge_ratio * clearance``, at least 2 cells). The resulting ridge is
+   thinned to a one-pixel, 8-connected skeleton (Guo-Hall parallel thinning, which preserves the
+   topology of the free space).
+3. Spurs (short terminal arcs, e.g. the bisectors running into concave room corners) are pruned
+   when shorter than ``max(min_spur_length, spur_factor * clearance of their junction)``.
+4. Nodes: *branch* nodes where three or more arcs meet (the paper's only kind; nodes closer than
+   ``merge_radius`` are merged), plus configurable extras that cover places where branch nodes
+   alone fail: *dead ends* of arcs, one *region* node (at the point of maximum clearance) for
+   every GVD component / free region without a node, and *arc* nodes spaced at most
+   ``arc_spacing`` apart along the GVD (farthest-point sampling by geodesic distance).
+5. Edges link nodes whose GVD territories (geodesic Voronoi cells on the skeleton) touch.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+from .map_io import OccupancyMap
+from .progress import ProgressCallback
+
+
+class NodeKind(IntEnum):
+    """Why a node exists (stored as a small int)."""
+
+    BRANCH = 0    # three or more GVD arcs meet (paper section III)
+    DEAD_END = 1  # end of a GVD arc
+    REGION = 2    # a GVD component / free region that would otherwise have no node
+    ARC = 3       # sampled along a long GVD arc
+
+
+NODE_KIND_NAMES: tuple[str, ...] = tuple(k.name.lower() for k in NodeKind)
+
+
+@dataclass(frozen=True)
+class TopologyConfig:
+    """GVD and node selection parameters (lengths in metres).
+
+    ``min_clearance``: robot radius; cells nearer an obstacle are not traversable.
+    ``free_thresh``: occupancy at or below which a cell is free (others, unknown included, are
+    obstacles). ``ridge_ratio``: minimum separation of the two nearest obstacle points, as a
+    fraction of the clearance, for a cell to be on the GVD (1.0 = they subtend >= 60 deg).
+    ``spur_factor`` / ``min_spur_length``: spur pruning (see module doc). ``merge_radius``:
+    nodes closer than this are merged. ``dead_end_nodes``, ``region_nodes``: enable the extras;
+    ``arc_spacing``: maximum geodesic spacing of nodes along the GVD (0 disables arc nodes).
+    ``min_region_area``: free regions smaller than this (m^2) get no region node.
+    """
+
+    min_clearance: float = 0.2
+    free_thresh: int = 25
+    ridge_ratio: float = 0.5
+    spur_factor: float = 1.5
+    weak_spur_factor: float = 2.0
+    min_spur_length: float = 0.5
+    merge_radius: float = 0.5
+    dead_end_nodes: bool = True
+    region_nodes: bool = True
+    arc_spacing: float = 2.5
+    min_region_area: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ('min_clearance', 'ridge_ratio', 'spur_factor', 'weak_spur_factor',
+                     'min_spur_length',
+                     'merge_radius', 'arc_spacing', 'min_region_area'):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f'TopologyConfig.{name}: expected a number >= 0, got {v!r}')
+        if not 0 <= self.free_thresh <= 100:
+            raise ValueError(f'TopologyConfig.free_thresh: expected 0..100, got '
+                             f'{self.free_thresh!r}')
+
+
+@dataclass(frozen=True, eq=False)
+class Topology:
+    """Nodes and GVD of a map. ``node_cell`` are (row, col) grid cells, ``clearance`` (H, W) the
+    brushfire distance in metres (0 on obstacles), ``edges`` (E, 2) node index pairs."""
+
+    node_xy: np.ndarray
+    node_kind: np.ndarray
+    node_cell: np.ndarray
+    node_clearance: np.ndarray
+    edges: np.ndarray
+    gvd_mask: np.ndarray
+    clearance: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.node_xy)
+
+    def kind_counts(self) -> dict[str, int]:
+        counts = np.bincount(self.node_kind.astype(np.int64), minlength=len(NODE_KIND_NAMES))
+        return {name: int(counts[i]) for i, name in enumerate(NODE_KIND_NAMES)}
+
+
+# --------------------------------------------------------------------------- 8-neighbourhoods
+# Ring order x1..x8 = E, NE, N, NW, W, SW, S, SE (bit i = x_{i+1}); rows grow northwards.
+
+def _bits(n: int) -> list[bool]:
+    return [bool(n >> i & 1) for i in range(8)]
+
+
+def _guo_hall(n: int, first: bool) -> bool:
+    """True when the centre pixel may be deleted (Guo & Hall 1989, two-subiteration A1)."""
+    x = _bits(n) + _bits(n)[:1]  # x[0..8], x[8] = x1
+    c = sum((not x[2 * i]) and (x[2 * i + 1] or x[2 * i + 2]) for i in range(4))
+    n1 = sum(x[2 * k] or x[2 * k + 1] for k in range(4))
+    n2 = sum(x[2 * k + 1] or x[2 * k + 2] for k in range(4))
+    if c != 1 or not 2 <= min(n1, n2) <= 3:
+        return False
+    if first:
+        return not ((x[1] or x[2] or not x[7]) and x[0])
+    return not ((x[5] or x[6] or not x[3]) and x[4])
+
+
+_LUT_THIN = (np.array([_guo_hall(n, True) for n in range(256)]),
+             np.array([_guo_hall(n, False) for n in range(256)]))
+
+
+def _ring(w: int) -> np.ndarray:
+    return np.array([1, w + 1, w, w - 1, -1, -w - 1, -w, -w + 1], dtype=np.int64)
+
+
+def _codes(mask: np.ndarray, idx: np.ndarray, ring: np.ndarray) -> np.ndarray:
+    code = np.zeros(len(idx), dtype=np.uint8)
+    for i, o in enumerate(ring):
+        code |= mask[idx + o].view(np.uint8) << np.uint8(i)
+    return code
+
+
+def _thin(mask: np.ndarray, ring: np.ndarray) -> None:
+    """Guo-Hall thinning of the flat bool ``mask`` in place (pixels must not touch the edge)."""
+    idx = np.flatnonzero(mask)
+    while idx.size:
+        changed = False
+        for lut in _LUT_THIN:
+            dele = lut[_codes(mask, idx, ring)]
+            if dele.any():
+                mask[idx[dele]] = False
+                idx = idx[~dele]
+                changed = True
+        if not changed:
+            break
+
+
+def _graph(idx: np.ndarray, mask: np.ndarray, w: int, res: float):
+    """Sparse symmetric 8-neighbour graph over the sorted flat pixel indices ``idx``.
+
+    Returns the csr graph (weights in metres) and each undirected edge once (``er``, ``ec``).
+    """
+    rows, cols, wts = [], [], []
+    # A diagonal step is redundant (and would short-circuit junctions) when the two pixels
+    # share a 4-neighbour on the skeleton.
+    for o, length, via in ((1, 1.0, ()), (w, 1.0, ()), (w + 1, math.sqrt(2), (1, w)),
+                           (w - 1, math.sqrt(2), (-1, w))):
+        nb = idx + o
+        ok = mask[nb]
+        for v in via:
+            ok &= ~mask[idx + v]
+        rows.append(np.flatnonzero(ok))
+        cols.append(np.searchsorted(idx, nb[ok]))
+        wts.append(np.full(int(ok.sum()), length * res))
+    r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(wts)
+    n = len(idx)
+    g = coo_matrix((np.concatenate((v, v)), (np.concatenate((r, c)), np.concatenate((c, r)))),
+                   shape=(n, n)).tocsr()
+    return g, r, c
+
+
+@dataclass
+class _Skeleton:
+    idx: np.ndarray        # flat indices (padded grid) of skeleton pixels, sorted
+    graph: object          # csr (n, n), edge weights in metres
+    er: np.ndarray         # edge endpoints (each undirected edge once)
+    ec: np.ndarray
+    junction: np.ndarray   # bool (n,)
+    endpoint: np.ndarray   # bool (n,)
+    arc: np.ndarray        # arc label per pixel, -1 on junction pixels
+    n_arcs: int
+    cluster: np.ndarray    # junction-cluster label per pixel, -1 elsewhere
+    n_clusters: int
+    adj: np.ndarray        # (M, 2) unique (arc, cluster) contacts
+
+
+def _components(n: int, er: np.ndarray, ec: np.ndarray, keep: np.ndarray) -> tuple[int, np.ndarray]:
+    sel = keep[er] & keep[ec]
+    g = coo_matrix((np.ones(int(sel.sum())), (er[sel], ec[sel])), shape=(n, n))
+    _, lab = connected_components(g, directed=False)
+    out = np.full(n, -1, dtype=np.int64)
+    _, out[keep] = np.unique(lab[keep], return_inverse=True)
+    return int(out.max()) + 1 if keep.any() else 0, out
+
+
+def _analyse(mask: np.ndarray, w: int, res: float) -> _Skeleton:
+    idx = np.flatnonzero(mask)
+    graph, er, ec = _graph(idx, mask, w, res)
+    n = len(idx)
+    degree = np.bincount(er, minlength=n) + np.bincount(ec, minlength=n)
+    junction = degree >= 3
+    endpoint = degree <= 1
+    n_arcs, arc = _components(n, er, ec, ~junction)
+    n_cl, cluster = _components(n, er, ec, junction)
+    a = np.concatenate((arc[er], arc[ec]))
+    c = np.concatenate((cluster[ec], cluster[er]))
+    ok = (a >= 0) & (c >= 0)
+    adj = np.unique(np.column_stack((a[ok], c[ok])), axis=0) if ok.any() \
+        else np.zeros((0, 2), dtype=np.int64)
+    return _Skeleton(idx, graph, er, ec, junction, endpoint, arc, n_arcs, cluster, n_cl, adj)
+
+
+# --------------------------------------------------------------------------- main entry
+
+def build_topology(occ_map: OccupancyMap, config: TopologyConfig | None = None,
+                   progress: ProgressCallback | None = None) -> Topology:
+    """Brushfire distance, GVD and nodes of ``occ_map`` (see the module docstring)."""
+    cfg = config or TopologyConfig()
+    res = occ_map.resolution
+    h, w = occ_map.shape
+    report = progress or (lambda done, total, label: None)
+    steps = 5
+    report(0, steps, 'brushfire')
+    # 1. Brushfire on the padded grid (outside = obstacle).
+    free = np.zeros((h + 2, w + 2), dtype=bool)
+    free[1:-1, 1:-1] = occ_map.free_mask(cfg.free_thresh)
+    wp = w + 2
+    dist, feat = ndimage.distance_transform_edt(free, return_indices=True)
+    feat = feat.astype(np.int32, copy=False)
+    min_clear_cells = cfg.min_clearance / res
+    traversable = free & (dist >= max(min_clear_cells, 1.0))
+    report(1, steps, 'gvd')
+    # 2. Ridge of the feature transform: neighbours with far-apart nearest obstacle cells.
+    ridge = np.zeros_like(free)
+    strength = np.zeros(free.shape, dtype=np.float32)  # sep / clearance at ridge cells
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        sp = (slice(0, h + 2 - dr), slice(max(0, -dc), w + 2 - max(0, dc)))
+        sq = (slice(dr, h + 2), slice(max(0, dc), w + 2 + min(0, dc)))
+        both = traversable[sp] & traversable[sq]
+        sep2 = ((feat[0][sp] - feat[0][sq]).astype(np.int64) ** 2
+                + (feat[1][sp] - feat[1][sq]).astype(np.int64) ** 2)
+        dmax = np.maximum(dist[sp], dist[sq])
+        on = both & (sep2 > np.maximum(9.0, (cfg.ridge_ratio * dmax) ** 2))
+        ridge[sp] |= on
+        ridge[sq] |= on
+        ratio = np.where(on, np.sqrt(sep2, dtype=np.float32) / np.maximum(dmax, 1.0), 0.0)
+        np.maximum(strength[sp], ratio, out=strength[sp])
+        np.maximum(strength[sq], ratio, out=strength[sq])
+    del feat
+    mask = ridge.ravel()
+    ring = _ring(wp)
+    _thin(mask, ring)
+    report(2, steps, 'prune')
+    # 3. Spur pruning.
+    dflat = dist.ravel()
+    sflat = strength.ravel()
+    for _ in range(20):
+        sk = _analyse(mask, wp, res)
+        if sk.idx.size == 0:
+            break
+        arc_len = np.bincount(sk.arc[sk.arc >= 0], minlength=sk.n_arcs) * res
+        has_end = np.bincount(sk.arc[sk.endpoint & (sk.arc >= 0)], minlength=sk.n_arcs) > 0
+        n_adj = np.bincount(sk.adj[:, 0], minlength=sk.n_arcs)
+        cl_clear = np.zeros(max(sk.n_clusters, 1))
+        if sk.n_clusters:
+            np.maximum.at(cl_clear, sk.cluster[sk.junction], dflat[sk.idx[sk.junction]] * res)
+        limit = np.full(sk.n_arcs, cfg.min_spur_length)
+        one = np.flatnonzero(n_adj == 1)
+        if one.size:
+            first = np.searchsorted(sk.adj[:, 0], one)
+            limit[one] = np.maximum(cfg.min_spur_length,
+                                    cfg.spur_factor * cl_clear[sk.adj[first, 1]])
+        # weak arcs (nearest obstacle points subtend < 60 deg) are mostly wall noise
+        on_arc = sk.arc >= 0
+        weak = np.bincount(sk.arc[on_arc], weights=sflat[sk.idx[on_arc]] < 1.0,
+                           minlength=sk.n_arcs) > 0.5 * np.maximum(arc_len / res, 1)
+        limit = np.where(weak, limit * cfg.weak_spur_factor, limit)
+        spur = has_end & (n_adj <= 1) & (arc_len < limit)
+        # an isolated junction cluster (all its arcs pruned earlier) is noise too
+        lone = np.zeros(max(sk.n_clusters, 1), dtype=bool)
+        if sk.n_clusters:
+            lone[:sk.n_clusters] = np.bincount(sk.adj[:, 1], minlength=sk.n_clusters) == 0
+            cl_size = np.bincount(sk.cluster[sk.junction], minlength=sk.n_clusters) * res
+            lone[:sk.n_clusters] &= cl_size < cfg.min_spur_length
+        drop = (spur[np.maximum(sk.arc, 0)] & (sk.arc >= 0)) \
+            | (lone[np.maximum(sk.cluster, 0)] & (sk.cluster >= 0))
+        # whole skeleton components shorter than a spur (tiny loops, specks)
+        _, comp = connected_components(sk.graph, directed=False)
+        small = np.bincount(comp) * res < cfg.min_spur_length
+        drop |= small[comp]
+        if not drop.any():
+            break
+        mask[sk.idx[drop]] = False
+        _thin(mask, ring)
+    sk = _analyse(mask, wp, res)
+    report(3, steps, 'nodes')
+    nodes, kinds = _select_nodes(sk, dflat, traversable, wp, res, cfg)
+    report(4, steps, 'edges')
+    edges = _edges(sk, nodes)
+    rows, cols = nodes // wp - 1, nodes % wp - 1
+    gvd = mask.reshape(h + 2, w + 2)[1:-1, 1:-1].copy()
+    clearance = (dist[1:-1, 1:-1] * res).astype(np.float32)
+    report(steps, steps, 'done')
+    return Topology(node_xy=occ_map.cell_to_world(rows, cols).reshape(-1, 2),
+                    node_kind=np.asarray(kinds, dtype=np.int8),
+                    node_cell=np.column_stack((rows, cols)).astype(np.int64).reshape(-1, 2),
+                    node_clearance=(dflat[nodes] * res).astype(np.float64),
+                    edges=edges, gvd_mask=gvd, clearance=clearance)
+
+
+def _merge(cands: np.ndarray, score: np.ndarray, w: int, radius_cells: float) -> np.ndarray:
+    """Greedy merge: keep the highest-score candidate, drop others within the radius."""
+    if cands.size <= 1 or radius_cells <= 0:
+        return cands
+    from scipy.spatial import cKDTree
+    order = np.argsort(-score, kind='stable')
+    c = cands[order]
+    pts = np.column_stack((c // w, c % w)).astype(float)
+    tree = cKDTree(pts)
+    alive = np.ones(len(c), dtype=bool)
+    for i in range(len(c)):
+        if alive[i]:
+            near = tree.query_ball_point(pts[i], radius_cells)
+            alive[near] = False
+            alive[i] = True
+    return c[alive]
+
+
+def _far_from(cands: np.ndarray, existing: list[int], w: int, radius_cells: float) -> np.ndarray:
+    if cands.size == 0 or not existing or radius_cells <= 0:
+        return cands
+    from scipy.spatial import cKDTree
+    e = np.asarray(existing)
+    tree = cKDTree(np.column_stack((e // w, e % w)).astype(float))
+    d, _ = tree.query(np.column_stack((cands // w, cands % w)).astype(float))
+    return cands[d > radius_cells]
+
+
+def _select_nodes(sk: _Skeleton, dflat: np.ndarray, traversable: np.ndarray, w: int,
+                  res: float, cfg: TopologyConfig) -> tuple[np.ndarray, list[int]]:
+    nodes: list[int] = []
+    kinds: list[int] = []
+    rad = cfg.merge_radius / res
+
+    def add(cells, kind):
+        nodes.extend(int(c) for c in cells)
+        kinds.extend([int(kind)] * len(cells))
+
+    # Branch nodes: junction clusters touching >= 3 arcs, at their max-clearance pixel.
+    if sk.n_clusters:
+        degree = np.bincount(sk.adj[:, 1], minlength=sk.n_clusters)
+        jpix = np.flatnonzero(sk.junction)
+        order = jpix[np.lexsort((-dflat[sk.idx[jpix]], sk.cluster[jpix]))]
+        cl = sk.cluster[order]
+        best = order[np.r_[True, cl[1:] != cl[:-1]]]  # max clearance pixel per cluster
+        best = best[degree[sk.cluster[best]] >= 3]
+        cells = sk.idx[best]
+        add(_merge(cells, dflat[cells], w, rad), NodeKind.BRANCH)
+    # Dead ends.
+    if cfg.dead_end_nodes and sk.idx.size:
+        cells = sk.idx[sk.endpoint]
+        cells = _far_from(_merge(cells, dflat[cells], w, rad), nodes, w, rad)
+        add(cells, NodeKind.DEAD_END)
+    # Region nodes: GVD components, then traversable regions, without any node.
+    if cfg.region_nodes:
+        min_cells = cfg.min_region_area / (res * res)
+        if sk.idx.size:
+            n_comp, comp = connected_components(sk.graph, directed=False)
+            has = np.zeros(n_comp, dtype=bool)
+            pos = np.searchsorted(sk.idx, nodes) if nodes else np.zeros(0, dtype=np.int64)
+            on = pos < len(sk.idx)
+            on[on] &= sk.idx[pos[on]] == np.asarray(nodes, dtype=np.int64)[on]
+            has[comp[pos[on]]] = True
+            d = dflat[sk.idx]
+            order = np.lexsort((-d, comp))
+            first = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]
+            add(sk.idx[first[~has[comp[first]]]], NodeKind.REGION)
+        lab, n_reg = ndimage.label(traversable, structure=np.ones((3, 3), dtype=bool))
+        if n_reg:
+            labf = lab.ravel()
+            area = np.bincount(labf, minlength=n_reg + 1)
+            has = np.zeros(n_reg + 1, dtype=bool)
+            has[labf[np.asarray(nodes, dtype=np.int64)]] = True
+            if sk.idx.size:
+                has[labf[sk.idx]] = True
+            want = np.flatnonzero(~has & (area >= max(min_cells, 1)))
+            want = want[want > 0]
+            if want.size:
+                d2 = dflat.reshape(lab.shape)
+                boxes = ndimage.find_objects(lab)
+                best = []
+                for lbl in want:
+                    sl = boxes[lbl - 1]
+                    sub = np.where(lab[sl] == lbl, d2[sl], -1.0)
+                    r, c = np.unravel_index(int(np.argmax(sub)), sub.shape)
+                    best.append((r + sl[0].start) * w + c + sl[1].start)
+                add(best, NodeKind.REGION)
+    # Arc nodes: farthest-point sampling along the GVD, spacing <= arc_spacing.
+    if cfg.arc_spacing > 0 and sk.idx.size:
+        half = cfg.arc_spacing / 2.0
+        pos = np.searchsorted(sk.idx, nodes) if nodes else np.zeros(0, dtype=np.int64)
+        on = pos < len(sk.idx)
+        on[on] &= sk.idx[pos[on]] == np.asarray(nodes, dtype=np.int64)[on]
+        src = np.unique(pos[on])
+        if src.size:
+            geo = dijkstra(sk.graph, directed=True, indices=src, min_only=True)
+        else:
+            geo = np.full(len(sk.idx), np.inf)
+        new = []
+        while True:
+            k = int(np.argmax(geo))
+            if not geo[k] > half:
+                break
+            new.append(k)
+            lim = geo[k] if np.isfinite(geo[k]) else np.inf
+            dk = dijkstra(sk.graph, directed=True, indices=k, limit=lim)
+            np.minimum(geo, dk, out=geo)
+        add(sk.idx[new], NodeKind.ARC)
+    return np.asarray(nodes, dtype=np.int64), kinds
+
+
+def _edges(sk: _Skeleton, nodes: np.ndarray) -> np.ndarray:
+    """Pairs of nodes whose geodesic territories on the GVD touch."""
+    if sk.idx.size == 0 or nodes.size < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    pos = np.searchsorted(sk.idx, nodes)
+    on = pos < len(sk.idx)
+    on[on] &= sk.idx[pos[on]] == nodes[on]
+    if on.sum() < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    node_of = np.full(len(sk.idx), -1, dtype=np.int64)
+    node_of[pos[on]] = np.flatnonzero(on)
+    _, _, sources = dijkstra(sk.graph, directed=True, indices=pos[on], min_only=True,
+                             return_predecessors=True)
+    owner = np.where(sources >= 0, node_of[np.maximum(sources, 0)], -1)
+    a, b = owner[sk.er], owner[sk.ec]
+    ok = (a >= 0) & (b >= 0) & (a != b)
+    if not ok.any():
+        return np.zeros((0, 2), dtype=np.int64)
+    pairs = np.sort(np.column_stack((a[ok], b[ok])), axis=1)
+    return np.unique(pairs, axis=0)

@@ -1,0 +1,179 @@
+"""Shared pytest setup.
+
+ROS isolation: every test run gets its own ``ROS_DOMAIN_ID`` (from the pid) and localhost-only
+discovery, set here before any test calls ``rclpy.init``, so parallel runs (and a robot on the
+network) never see each other. Set ``SSM_TEST_ROS_DOMAIN_ID`` to force a domain.
+ROS helpers (:class:`RosHarness`, the ``ros`` fixture) live here for the ``test_ros_*`` modules.
+"""
+from __future__ import annotations
+
+import os
+import random
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_MAPS = Path('/work/shared/data/maps')
+BAGS = REPO / 'bags'
+
+_RNG = random.Random(os.getpid() ^ time.time_ns())
+os.environ['ROS_DOMAIN_ID'] = os.environ.get('SSM_TEST_ROS_DOMAIN_ID', str(_RNG.randint(1, 101)))
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.setdefault('MPLBACKEND', 'Agg')
+
+RCLPY_SKIP_REASON = ('rclpy is not importable: the ROS 2 tests need ROS 2 Jazzy Python packages '
+                     '(`make venv` installs them from PyPI, or source /opt/ros/jazzy/setup.bash)')
+
+
+def venv_bin(name: str) -> Path:
+    """A console script next to the running interpreter (the venv's bin/)."""
+    return Path(sys.executable).parent / name
+
+
+def find_bag(name: str) -> Path:
+    """bags/<name> (directory or .mcap); skips the test when that bag has not been generated."""
+    for cand in (BAGS / name, BAGS / f'{name}.mcap'):
+        if cand.exists():
+            return cand
+    pytest.skip(f'bag {BAGS / name} is not in the repository yet')
+
+
+class RosHarness:
+    """An rclpy context with a background MultiThreadedExecutor and a helper node."""
+
+    def __init__(self, args: list[str] | None = None) -> None:
+        import rclpy
+        from rclpy.executors import MultiThreadedExecutor
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(args=args, context=self.context)
+        self.executor = MultiThreadedExecutor(num_threads=6, context=self.context)
+        self.node = rclpy.create_node(f'ssm_test_{os.getpid()}', context=self.context)
+        self.executor.add_node(self.node)
+        self._nodes = [self.node]
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        from rclpy.executors import ExternalShutdownException
+        try:
+            self.executor.spin()
+        except (ExternalShutdownException, Exception):  # noqa: BLE001 - shutdown races
+            pass
+
+    def add(self, node):
+        """Spin ``node`` (created with ``context=harness.context``) too; return it."""
+        self.executor.add_node(node)
+        self._nodes.append(node)
+        return node
+
+    def remove(self, node) -> None:
+        self.executor.remove_node(node)
+        self._nodes.remove(node)
+        node.destroy_node()
+
+    def collect(self, msg_type, topic: str, qos) -> list:
+        """Subscribe and append every message to the returned list."""
+        got: list = []
+        self.node.create_subscription(msg_type, topic, got.append, qos)
+        return got
+
+    @staticmethod
+    def wait_for(pred: Callable[[], Any], timeout: float, period: float = 0.02) -> Any:
+        end = time.monotonic() + timeout
+        while True:
+            value = pred()
+            if value or time.monotonic() > end:
+                return value
+            time.sleep(period)
+
+    def call(self, client, request, timeout: float = 30.0):
+        """Call a service (waits for it first); the response, or None on timeout."""
+        if not client.wait_for_service(timeout_sec=min(timeout, 10.0)):
+            return None
+        future = client.call_async(request)
+        end = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < end:
+            time.sleep(0.02)
+        return future.result() if future.done() else None
+
+    def close(self) -> None:
+        for node in list(self._nodes):
+            try:
+                self.executor.remove_node(node)
+                node.destroy_node()
+            except Exception:  # noqa: BLE001
+                pass
+        self.executor.shutdown(timeout_sec=2.0)
+        self.rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=5.0)
+
+
+def _domain_is_quiet(domain: int, wait: float = 0.7) -> bool:
+    """True when no other ROS node or topic shows up on ``domain`` within ``wait`` seconds."""
+    import rclpy
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('ssm_domain_probe', context=ctx)
+    try:
+        end = time.monotonic() + wait
+        while time.monotonic() < end:
+            others = [n for n, _ in node.get_node_names_and_namespaces() if n != node.get_name()]
+            topics = [t for t, _ in node.get_topic_names_and_types()
+                      if t not in ('/rosout', '/parameter_events')]
+            if others or topics:
+                return False
+            time.sleep(0.1)
+        return True
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture(scope='session')
+def ros_domain() -> int:
+    """A ROS domain nobody else on this host uses right now (exported in ROS_DOMAIN_ID)."""
+    pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
+    if 'SSM_TEST_ROS_DOMAIN_ID' in os.environ:
+        return int(os.environ['SSM_TEST_ROS_DOMAIN_ID'])
+    domain = int(os.environ['ROS_DOMAIN_ID'])
+    for _ in range(8):
+        if _domain_is_quiet(domain):
+            break
+        domain = _RNG.randint(1, 101)
+    os.environ['ROS_DOMAIN_ID'] = str(domain)
+    return domain
+
+
+@pytest.fixture
+def ros(ros_domain):
+    harness = RosHarness()
+    try:
+        yield harness
+    finally:
+        harness.close()
+
+
+def synthetic_map(variant: int = 0):
+    """A small 3-room map (10 m x 7 m at 0.05 m, frame ``map``); ``variant`` adds furniture."""
+    import numpy as np
+
+    from ssm_localization.map_io import OccupancyMap
+    res = 0.05
+    data = np.zeros((140, 200), np.int8)
+
+    def box(x0: float, y0: float, x1: float, y1: float) -> None:
+        data[int(round(y0 / res)):int(round(y1 / res)), int(round(x0 / res)):int(round(x1 / res))] = 100
+    box(0, 0, 10, 0.1), box(0, 6.9, 10, 7), box(0, 0, 0.1, 7), box(9.9, 0, 10, 7)
+    box(4.0, 0, 4.1, 3.0), box(4.0, 4.0, 4.1, 7)          # wall with a door at y 3..4
+    box(7.0, 0, 7.1, 1.0), box(7.0, 2.0, 7.1, 7)          # wall with a door at y 1..2
+    box(1.2, 4.6, 1.8, 5.0), box(8.3, 5.0, 8.7, 5.8), box(5.4, 0.8, 5.7, 1.1)
+    box(2.5, 1.0, 2.8, 2.2), box(5.0, 5.5, 6.2, 5.8)
+    for k in range(variant):
+        box(1.0 + 0.8 * k, 3.0, 1.3 + 0.8 * k, 3.3)
+    return OccupancyMap(data, res, (-1.0, -0.5, 0.0), 'map')

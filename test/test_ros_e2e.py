@@ -1,0 +1,124 @@
+"""End to end over real DDS: the installed ``global_localizer`` console script started like
+``ros2 run`` (``--ros-args --params-file config/ssm_localization.yaml``), a bag published by
+``ssm_localization play``, the ``relocalize`` service called from the test, poses checked against
+the bag's /ground_truth. Includes a kidnapping: a second, distant scan after a first fix.
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import RCLPY_SKIP_REASON, REPO, find_bag, venv_bin
+
+pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
+
+from geometry_msgs.msg import PoseWithCovarianceStamped  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
+
+from ssm_localization.ros.conversions import pose_from_msg, stamp_to_sec  # noqa: E402
+from ssm_localization.ros.map_indexer import LATCHED_QOS  # noqa: E402
+from ssm_localization.transforms import wrap_angle  # noqa: E402
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+PARAMS = REPO / 'config' / 'ssm_localization.yaml'
+
+
+class Proc:
+    """A child process whose output goes to a log file; stopped with SIGINT, then SIGKILL."""
+
+    def __init__(self, cmd: list[str], log: Path) -> None:
+        self.log = log
+        self._fh = open(log, 'w')
+        self.p = subprocess.Popen([str(c) for c in cmd], stdout=self._fh,
+                                  stderr=subprocess.STDOUT, env=dict(os.environ), cwd=REPO)
+
+    def text(self) -> str:
+        self._fh.flush()
+        return self.log.read_text()
+
+    def stop(self, timeout: float = 10.0) -> int:
+        if self.p.poll() is None:
+            self.p.send_signal(signal.SIGINT)
+            try:
+                self.p.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.p.kill()
+                self.p.wait(5)
+        self._fh.close()
+        return self.p.returncode
+
+
+def _play_one_scan(bag: Path, data, k: int, log: Path) -> Proc:
+    """``ssm_localization play`` looping over scan ``k`` only (the map is latched once)."""
+    t0 = min(s.stamp for s in data.scans)
+    offset = data.scans[k].stamp - t0
+    return Proc([venv_bin('ssm_localization'), 'play', bag, '--rate', '1', '--loop',
+                 '--start-offset', f'{max(offset - 1e-4, 0.0):.6f}', '--duration', '0.0002',
+                 '--topics', '/map', '/scan', '--delay', '0.2'], log)
+
+
+def _relocalize(ros, client, timeout: float = 60.0):
+    return ros.call(client, Trigger.Request(), timeout)
+
+
+def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
+    from ssm_localization.bags import read_bag
+    bag = find_bag('depot_sim')
+    data = read_bag(bag)
+    assert PARAMS.exists()
+    node_log = tmp_path / 'global_localizer.log'
+    localizer = Proc([venv_bin('global_localizer'), '--ros-args', '--params-file', PARAMS,
+                      '-p', 'scan_timeout:=10.0'], node_log)
+    plays: list[Proc] = []
+    try:
+        poses = ros.collect(PoseWithCovarianceStamped, 'global_pose', LATCHED_QOS)
+        marks = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
+        client = ros.node.create_client(Trigger, 'relocalize')
+        assert client.wait_for_service(timeout_sec=20.0), node_log.read_text()
+
+        # before any map: a clear failure
+        res = _relocalize(ros, client, 20.0)
+        assert res is not None and not res.success and 'no map' in res.message, res
+
+        with_truth = [i for i, s in enumerate(data.scans) if s.stamp in data.ground_truth]
+        truth = np.array([data.ground_truth[data.scans[i].stamp] for i in with_truth])
+        k0 = with_truth[0]
+        k1 = with_truth[int(np.argmax(np.hypot(*(truth[:, :2] - truth[0, :2]).T)))]
+        assert math.dist(truth[0][:2], data.ground_truth[data.scans[k1].stamp][:2]) > 3.0
+
+        for k in (k0, k1):              # first fix, then kidnapped to a distant place
+            plays.append(_play_one_scan(bag, data, k, tmp_path / f'play_{k}.log'))
+            # wait for the index (published once ready), then ask
+            assert ros.wait_for(lambda: any(any(m.ns == 'nodes' for m in a.markers)
+                                            for a in marks), 180), localizer.text()
+            n_before = len(poses)
+            res = _relocalize(ros, client)
+            assert res is not None, localizer.text()
+            assert res.success, f'{res.message}\n{localizer.text()}'
+            assert ros.wait_for(lambda: len(poses) > n_before, 10)
+            msg = poses[-1]
+            stamp = data.scans[k].stamp
+            assert stamp_to_sec(msg.header.stamp) == pytest.approx(stamp, abs=1e-6)
+            assert msg.header.frame_id == 'map'
+            x, y, yaw = pose_from_msg(msg.pose.pose)
+            tx, ty, tyaw = data.ground_truth[stamp]
+            assert math.hypot(x - tx, y - ty) < 0.15, (k, (x, y, yaw), (tx, ty, tyaw))
+            assert abs(float(wrap_angle(yaw - tyaw))) < 0.05
+            assert f'x={x:.3f}' in res.message and 'status=ok' in res.message
+            plays[-1].stop()
+        assert 'same map' in localizer.text()     # the second play did not trigger re-indexing
+    finally:
+        for p in plays:
+            p.stop()
+        code = localizer.stop()
+    assert code == 0, node_log.read_text()
+    assert 'Traceback' not in node_log.read_text()
