@@ -77,6 +77,7 @@ def read_carmen_log(path: str | Path, max_range: float | None = None) -> CarmenL
     odo = None            # raw odometry at the last FLASER line
     reset = None          # the ODOM pose the log restarted from after the last FLASER line
     last = None           # the latest ODOM pose
+    prev_raw = prev_pose = None   # the latest ODOM pose and the corrected pose at the last scan
     have_odom = True
     with opener(path, 'rt') as fh:
         for lineno, line in enumerate(fh, 1):
@@ -105,12 +106,17 @@ def read_carmen_log(path: str | Path, max_range: float | None = None) -> CarmenL
             n_beams = n
             if odo is None:
                 odo = last if last is not None else (0.0, 0.0, 0.0)
-            elif reset is not None and last is not None:
-                odo = compose(odo, compose(inverse(reset), last))
+            elif last is not None:
+                # increments count from the reset line (the corrected pose) when the log has
+                # one, else from the raw odometry at the previous scan
+                restarted = reset is not None and np.allclose(reset, prev_pose, atol=1e-6)
+                base = reset if restarted or prev_raw is None else prev_raw
+                odo = compose(odo, compose(inverse(base), last))
             else:
                 have_odom = False
             odometry.append(odo)
-            reset = last = None
+            prev_raw, prev_pose = last, (x, y, th)
+            reset = None
             rows.append(vals)
             poses.append((x, y, th))
             stamps.append(stamp)

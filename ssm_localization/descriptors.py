@@ -13,14 +13,16 @@ import numpy as np
 
 def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radial_bins: int,
                   angular_bins: int, context: np.ndarray | None = None,
-                  offsets=None) -> np.ndarray:
+                  offsets=None, weights: np.ndarray | None = None) -> np.ndarray:
     """(N, radial_bins * angular_bins) float32 descriptors, Hellinger-normalised (unit L2 norm).
 
     Neighbour ``j`` of point ``i`` (``0 < d_ij < radius``) is binned by ``log2(d_ij)`` (radial
     edges ``radius / 2**k``) and by its bearing in the frame (u_i, n_i); the bearing vote is split
     linearly between the two nearest angular bins so small tangent errors do not flip bins.
     Neighbours are taken from ``context`` (default: ``points``), ideally a spatially even set;
-    ``offsets`` may pass precomputed ``(dx, dy)`` = context - points, each (N, C).
+    ``offsets`` may pass precomputed ``(dx, dy)`` = context - points, each (N, C). ``weights``
+    (C,) weight each context point's vote (e.g. the scan length it stands for, so the histogram
+    measures surface length and does not depend on the sampling density).
     """
     ctx = points if context is None else context
     n = len(points)
@@ -49,8 +51,9 @@ def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radia
     a0 = f0.astype(int) % angular_bins
     a1 = (a0 + 1) % angular_bins
     base = ii * nb + rb * angular_bins
-    h = np.bincount(base + a0, weights=1.0 - w1, minlength=n * nb)
-    h += np.bincount(base + a1, weights=w1, minlength=n * nb)
+    cw = 1.0 if weights is None else weights[jj]
+    h = np.bincount(base + a0, weights=(1.0 - w1) * cw, minlength=n * nb)
+    h += np.bincount(base + a1, weights=w1 * cw, minlength=n * nb)
     h = h.reshape(n, nb)
     s = h.sum(axis=1, keepdims=True)
     h = np.sqrt(h / np.where(s > 0.0, s, 1.0))

@@ -1,4 +1,4 @@
-"""The topological index of a grid map (paper section III): GVD nodes with virtual 360-degree scans.
+"""Topological index of a grid map (paper section III): GVD nodes with virtual 360-degree scans.
 
 ``build_index`` extracts the nodes (``topology.py``), casts a virtual scan at every node
 (``raycast.py``, Table 1: the virtual laser's pose is the node pose ``(x, y, 0)`` composed with
@@ -22,8 +22,8 @@ from scipy import ndimage
 from .map_io import OccupancyMap
 from .matcher import MatcherConfig
 from .progress import ProgressCallback
+from .raycast import RayCaster
 from .raycast import beam_angles as _beam_angles
-from .raycast import cast_rays
 from .scan import ScanFeatures, prepare_scan
 from .topology import NODE_KIND_NAMES, NodeKind, TopologyConfig, build_topology
 from .transforms import compose
@@ -139,13 +139,13 @@ def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
     poses = np.array([compose((float(x), float(y), 0.0), cfg.sensor_pose)
                       for x, y in topo.node_xy], dtype=float).reshape(-1, 3)
     angles = _beam_angles(cfg.beams)
-    occupied = occ_map.occupied_mask(cfg.occupied_thresh)
+    caster = RayCaster(occ_map.occupied_mask(cfg.occupied_thresh), occ_map.resolution,
+                       occ_map.origin)
     ranges = np.full((k, len(angles)), np.inf)
-    chunk = 64
+    chunk = 128
     for s in range(0, k, chunk):
         report(s, k, 'virtual scans', 30, 60)
-        ranges[s:s + chunk] = cast_rays(occupied, occ_map.resolution, occ_map.origin,
-                                        poses[s:s + chunk], angles, cfg.max_range)
+        ranges[s:s + chunk] = caster.cast(poses[s:s + chunk], angles, cfg.max_range)
     cos, sin = np.cos(angles), np.sin(angles)
     features = []
     for i in range(k):
@@ -242,9 +242,16 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None) -> Ma
             raise ValueError(f'index was built for another map (checksum {checksum[:12]}..., '
                              f'expected {expected_map.checksum()[:12]}...); rebuild it for '
                              f'this map')
-        config = IndexConfig.from_json(str(data['config_json']))
+        try:
+            config = IndexConfig.from_json(str(data['config_json']))
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f'stored parameters do not fit this ssm_localization ({exc}); '
+                             f'rebuild the index') from None
         k = len(data['node_xy'])
         names = [str(n) for n in data['feature_fields']]
+        if set(names) != {f.name for f in dataclasses.fields(ScanFeatures)}:
+            raise ValueError(f'scan features stored with fields {names} do not match this '
+                             f'scan matcher; rebuild the index')
         features = []
         offs = {n: data[f'{_FEAT}{n}__offsets'] for n in names}
         for i in range(k):

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .descriptors import descriptor_distances
 from .index import MapIndex
 from .matcher import match_features, spectral_score
 from .raycast import cast_rays
@@ -36,7 +37,7 @@ class LocalizerConfig:
 
     top_n: int = 5                    # candidates kept by the coarse stage (paper: N = 5)
     prefilter: int = 16               # nodes kept by descriptor voting before spectral ranking; 0 = all
-    vote_neighbours: int = 8          # node descriptors looked up per query descriptor
+    vote_neighbours: int = 8          # nodes each query descriptor votes for (its nearest ones)
     sigma_d: float = 0.05             # eq. (10), metres
     laser_pose: Pose2 = (0.0, 0.0, 0.0)   # the laser's pose on the robot base (x, y, yaw)
     paper_mode: bool = False          # plain paper pipeline: no prefilter, refinement or checks
@@ -45,12 +46,13 @@ class LocalizerConfig:
     refine_iterations: int = 12
     max_cast_range: float = 30.0      # ray-cast range for the beam check, metres
     beam_tolerance: float = 0.15      # metres (+2 % of the range) for a beam to agree with the map
-    min_score: float = 0.45           # BeamCheck.score below which a hypothesis is rejected
-    max_contradicting: float = 0.15   # fraction of beams seeing through walls that rejects it
+    min_consistent: float = 0.5       # fewer beams agreeing with the map rejects a hypothesis
+    max_contradicting: float = 0.3    # more beams seeing through walls rejects it
     ambiguity_ratio: float = 1.5      # a distinct rival whose fit cost is within this factor: ambiguous
     distinct_xy: float = 0.5          # poses further apart than this are distinct (m) ...
     distinct_yaw: float = np.deg2rad(10.0)  # ... or than this (rad)
     min_points: int = 10              # fewer valid beams than this: failed
+    max_position_std: float = 0.15    # a larger position std (m) of the refined fit: degenerate
 
     def __post_init__(self) -> None:
         if self.top_n < 1:
@@ -79,7 +81,7 @@ class Hypothesis:
         return self.check.score if self.check is not None else self.vicinity
 
     def plausible(self, cfg: 'LocalizerConfig') -> bool:
-        return (self.check is not None and self.check.score >= cfg.min_score
+        return (self.check is not None and self.check.consistent >= cfg.min_consistent
                 and self.check.contradicting <= cfg.max_contradicting)
 
 
@@ -115,6 +117,10 @@ def vicinity_score(node_points: np.ndarray, query_points: np.ndarray, pose: Pose
     return float(np.sum(4.5 - d ** 2 / (2.0 * sigma_d ** 2)))
 
 
+def _same(a: Pose2, b: Pose2, xy: float = 0.05, yaw: float = np.deg2rad(2.0)) -> bool:
+    return np.hypot(a[0] - b[0], a[1] - b[1]) < xy and abs(wrap_angle(a[2] - b[2])) < yaw
+
+
 def _distinct(a: Pose2, b: Pose2, cfg: LocalizerConfig) -> bool:
     return (np.hypot(a[0] - b[0], a[1] - b[1]) > cfg.distinct_xy
             or abs(wrap_angle(a[2] - b[2])) > cfg.distinct_yaw)
@@ -135,10 +141,11 @@ class GlobalLocalizer:
             raise ValueError('the map index has no nodes: nothing to localize against')
         self._node_trees = [cKDTree(f.points) if len(f.points) else None for f in index.features]
         desc = [f.descriptors for f in index.features]
-        self._desc_owner = np.concatenate([np.full(len(d), k) for k, d in enumerate(desc)])
-        stacked = np.concatenate(desc) if len(self._desc_owner) else np.zeros((0, 1))
-        self._desc_tree = cKDTree(stacked) if len(stacked) else None
-        self._desc_count = np.bincount(self._desc_owner, minlength=len(desc)).astype(float)
+        self._desc_count = np.array([len(d) for d in desc])
+        self._desc_stack = (np.concatenate(desc) if self._desc_count.sum()
+                            else np.zeros((0, 1), np.float32))
+        self._desc_starts = np.minimum(np.concatenate(([0], np.cumsum(self._desc_count)[:-1])),
+                                       max(len(self._desc_stack) - 1, 0))
         m = index.map
         self._occupied = m.occupied_mask()
         self._surface = SurfaceModel.from_occupancy(self._occupied, m.resolution, m.origin,
@@ -176,14 +183,17 @@ class GlobalLocalizer:
         """Nodes ordered by descriptor votes (each query point votes once per node)."""
         n_nodes = len(self.index.features)
         cfg = self.config
-        if cfg.paper_mode or cfg.prefilter <= 0 or cfg.prefilter >= n_nodes or self._desc_tree is None:
+        if (cfg.paper_mode or cfg.prefilter <= 0 or cfg.prefilter >= n_nodes
+                or len(self._desc_stack) == 0 or len(query.descriptors) == 0):
             return np.arange(n_nodes)
-        k = min(cfg.vote_neighbours, len(self._desc_owner))
-        _, nn = self._desc_tree.query(query.descriptors, k=k)
-        owners = self._desc_owner[np.asarray(nn).reshape(len(query.descriptors), -1)]
-        votes = np.zeros(n_nodes)
-        for row in owners:
-            votes[np.unique(row)] += 1.0
+        # squared distance of every query descriptor to its nearest descriptor of every node
+        d2 = descriptor_distances(self._desc_stack, query.descriptors)          # (Q, total)
+        per_node = np.minimum.reduceat(d2, self._desc_starts, axis=1)           # (Q, nodes)
+        per_node[:, self._desc_count == 0] = np.inf
+        # each query point votes for its ``vote_neighbours`` best nodes
+        k = min(cfg.vote_neighbours, n_nodes)
+        best = np.argpartition(per_node, k - 1, axis=1)[:, :k]
+        votes = np.bincount(best.ravel(), minlength=n_nodes)
         return np.argsort(-votes, kind='stable')[:cfg.prefilter]
 
     def coarse(self, query, nodes: np.ndarray) -> list[Hypothesis]:
@@ -212,20 +222,38 @@ class GlobalLocalizer:
             out.append(h)
         return out
 
-    def verify(self, h: Hypothesis, points: np.ndarray, angles: np.ndarray, beams: np.ndarray) -> None:
-        """Refine ``h`` on the wall surface, then ray-cast the query's beams from it."""
+    def _refine_unique(self, hyps: list[Hypothesis], points: np.ndarray) -> list[Hypothesis]:
+        """Refine each distinct pose once on the wall surface; sort by fit cost."""
         cfg = self.config
-        r = refine_pose(self._surface, points, h.laser_pose,
-                        iterations=cfg.refine_iterations if cfg.refine else 0)
-        h.laser_pose = r.pose
-        h.cost = r.cost
-        h.covariance = self._base_covariance(r.covariance, h.laser_pose)
-        h.pose = compose(h.laser_pose, inverse(cfg.laser_pose))
+        out: list[Hypothesis] = []
+        for h in sorted(hyps, key=lambda h: -h.spectral):
+            if any(_same(h.laser_pose, o.laser_pose) for o in out):
+                continue
+            r = refine_pose(self._surface, points, h.laser_pose,
+                            iterations=cfg.refine_iterations if cfg.refine else 0)
+            h.laser_pose, h.cost = r.pose, r.cost
+            h.covariance = self._base_covariance(r.covariance, h.laser_pose)
+            h.pose = compose(h.laser_pose, inverse(cfg.laser_pose))
+            if not any(_same(h.laser_pose, o.laser_pose) for o in out):
+                out.append(h)
+        out.sort(key=lambda h: h.cost)
+        return out
+
+    def beam_check(self, h: Hypothesis, angles: np.ndarray, beams: np.ndarray) -> None:
+        """Ray-cast the query's beams from ``h`` and compare them with the measured ranges."""
+        cfg = self.config
         m = self.index.map
         expected = cast_rays(self._occupied, m.resolution, m.origin, np.array([h.laser_pose]),
                              angles, cfg.max_cast_range)[0]
         h.check = check_beams(np.where(beams > cfg.max_cast_range, np.inf, beams), expected,
                               tol=cfg.beam_tolerance)
+
+    @staticmethod
+    def _position_std(h: Hypothesis) -> float:
+        """Standard deviation (m) of the position along its least constrained direction."""
+        if h.covariance is None:
+            return float('inf')
+        return float(np.sqrt(max(np.linalg.eigvalsh(h.covariance[:2, :2]).max(), 0.0)))
 
     def _base_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
         """Propagate the laser-pose covariance to the base pose (first order)."""
@@ -252,18 +280,27 @@ class GlobalLocalizer:
             return Localization(status='ok', pose=best.pose, node=best.node, score=best.vicinity,
                                 candidates=hyps, latency_ms=(time.perf_counter() - t0) * 1e3,
                                 message='paper mode: largest vicinity score')
-        for h in hyps:
-            self.verify(h, points, angles, beams)
-        hyps.sort(key=lambda h: (not h.plausible(cfg), h.cost))
-        best = hyps[0]
+        hyps = self._refine_unique(hyps, points)
+        best = None
+        for h in hyps:                      # cheapest fit first; ray-cast only until one passes
+            self.beam_check(h, angles, beams)
+            if h.plausible(cfg):
+                best = h
+                break
         ms = (time.perf_counter() - t0) * 1e3
-        if not best.plausible(cfg):
-            return Localization(status='failed', pose=best.pose, node=best.node, score=best.score,
-                                candidates=hyps, latency_ms=ms,
-                                message=(f'no hypothesis agrees with the map (best: agree '
-                                         f'{best.check.consistent:.0%}, through walls '
-                                         f'{best.check.contradicting:.0%})'))
-        rivals = [h for h in hyps[1:] if h.plausible(cfg) and _distinct(h.pose, best.pose, cfg)
+        if best is None:
+            worst = hyps[0]
+            return Localization(status='failed', pose=worst.pose, node=worst.node,
+                                score=worst.score, candidates=hyps, latency_ms=ms,
+                                message=(f'no hypothesis agrees with the map (best fit: agree '
+                                         f'{worst.check.consistent:.0%}, through walls '
+                                         f'{worst.check.contradicting:.0%})'))
+        for h in hyps:
+            if h is not best and h.check is None and h.cost <= best.cost * cfg.ambiguity_ratio \
+                    and _distinct(h.pose, best.pose, cfg):
+                self.beam_check(h, angles, beams)
+        ms = (time.perf_counter() - t0) * 1e3
+        rivals = [h for h in hyps if h is not best and h.plausible(cfg) and _distinct(h.pose, best.pose, cfg)
                   and h.cost <= best.cost * cfg.ambiguity_ratio]
         cov = best.covariance
         if rivals:
@@ -271,6 +308,10 @@ class GlobalLocalizer:
             msg = f'{len(rivals) + 1} distinct poses fit about equally well'
             spread = np.array([h.pose for h in rivals + [best]])
             cov = cov + np.diag([*np.var(spread[:, :2], axis=0), np.pi ** 2 / 3.0])
+        elif self._position_std(best) > cfg.max_position_std:
+            status = 'ambiguous'
+            msg = (f'degenerate geometry (e.g. a corridor): position std '
+                   f'{self._position_std(best):.2f} m along the weakest direction')
         else:
             status = 'ok'
             msg = (f'agree {best.check.consistent:.0%}, through walls '

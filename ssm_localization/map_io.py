@@ -43,7 +43,8 @@ class OccupancyMap:
             raise ValueError(f'OccupancyMap.resolution: expected a positive number, got {res}')
         origin = tuple(float(v) for v in self.origin)
         if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
-            raise ValueError(f'OccupancyMap.origin: expected finite (x, y, yaw), got {self.origin}')
+            raise ValueError(f'OccupancyMap.origin: expected finite (x, y, yaw), '
+                             f'got {self.origin}')
         object.__setattr__(self, 'data', np.ascontiguousarray(data, dtype=np.int8))
         object.__setattr__(self, 'resolution', res)
         object.__setattr__(self, 'origin', origin)

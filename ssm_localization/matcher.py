@@ -7,7 +7,7 @@ L (descriptor top-k) -> affinity G (eqs. 2-4) -> leading eigenvector + greedy bi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -39,6 +39,7 @@ class MatcherConfig:
     gap: float = 0.5                 # eq. 1 only: neighbour jump treated as a gap
     # descriptors and tentative correspondences L (descriptors.py)
     desc_radius: float = 2.0
+    length_cap: float = 0.3          # descriptor votes weighted by scan length up to this (0: off)
     desc_radial_bins: int = 4
     desc_angular_bins: int = 8
     k_candidates: int = 3            # reference candidates per new point
@@ -55,6 +56,7 @@ class MatcherConfig:
     ransac_iterations: int = 200
     ransac_threshold: float = 0.15
     ransac_min_span: float = 0.3
+    ransac_weighted: bool = False    # draw / count pairs weighted by x* (beyond the paper)
     seed: int = 0
     min_inliers: int = 6
     # point-to-line ICP refinement (beyond the paper)
@@ -62,12 +64,16 @@ class MatcherConfig:
     icp_iterations: int = 15
     icp_max_dist: float = 0.3
     icp_min_dist: float = 0.05
-    icp_max_points: int = 250        # budget of the denser point set used by ICP
+    icp_max_points: int = 400        # budget of the denser point set used by ICP
     icp_min_spacing: float = 0.0
     normal_radius: float = 0.25      # PCA neighbourhood of the ICP normals
     polish: bool = True              # after ICP: point-to-point LS on mutual nearest neighbours
     polish_gate: float = 0.05
     polish_iterations: int = 2
+    # retries on the next spectral cluster when the pose explains too little (beyond the paper)
+    retries: int = 2
+    retry_overlap: float = 0.6       # fraction of new ICP points within overlap_dist
+    overlap_dist: float = 0.1
 
     def __post_init__(self):
         if self.max_points < 3:
@@ -86,7 +92,9 @@ class MatchResult:
     """``pose`` (x, y, yaw): ``p_ref ~= R(yaw) @ p_new + (x, y)``; ``pairs`` (K, 2) consistent
     correspondences (binarized eq. 6) as indices into the caller's ref / new arrays; ``score`` eq. 5
     at that solution; ``inliers`` (K_in, 2) the pairs supporting the pose; ``ok`` whether the
-    estimate is trustworthy (enough inliers). ``pose`` is NaN when nothing could be estimated."""
+    estimate is trustworthy (enough inliers); ``overlap`` the fraction of the new scan's points
+    within ``overlap_dist`` of the reference at ``pose``. ``pose`` is NaN when nothing could be
+    estimated."""
 
     pose: tuple[float, float, float]
     pairs: np.ndarray
@@ -96,7 +104,7 @@ class MatchResult:
     n_candidates: int = 0
     message: str = ''
     rms: float = math.nan
-    extra: dict = field(default_factory=dict, compare=False, repr=False)
+    overlap: float = math.nan
 
 
 def _empty(message: str, n_candidates: int = 0, score: float = 0.0,
@@ -131,26 +139,30 @@ def spectral_score(ref: ScanFeatures, new: ScanFeatures,
     return score, np.column_stack((ref.source_index[q[:, 0]], new.source_index[q[:, 1]]))
 
 
-def match_features(ref: ScanFeatures, new: ScanFeatures,
-                   config: MatcherConfig | None = None) -> MatchResult:
-    """Match two prepared scans; never raises on degenerate input (returns ``ok=False``)."""
-    config = config or MatcherConfig()
-    if ref.is_degenerate or new.is_degenerate:
-        return _empty('degenerate scan (fewer than 3 points or collinear)')
-    L, G, x, sel, score = _spectral(ref, new, config)
-    q = L[sel]
-    pairs = np.column_stack((ref.source_index[q[:, 0]], new.source_index[q[:, 1]]))
-    if len(q) < 2:
-        return _empty('too few consistent correspondences', len(L), score, pairs)
+def overlap(ref: ScanFeatures, new: ScanFeatures, pose, dist: float) -> float:
+    """Fraction of the new scan's ICP points within ``dist`` of a reference ICP point at ``pose``."""
+    if len(new.fine_points) == 0 or len(ref.fine_points) == 0:
+        return 0.0
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    moved = new.fine_points @ np.array([[c, s], [-s, c]]) + np.array(pose[:2])
+    d, _ = ref.fine_tree.query(moved, distance_upper_bound=dist)
+    return float(np.mean(d < dist))
+
+
+def _estimate(ref: ScanFeatures, new: ScanFeatures, q: np.ndarray, xq: np.ndarray,
+              config: MatcherConfig):
+    """RANSAC (II.C) on the consistent pairs ``q`` (eigenvector values ``xq``) then ICP;
+    ``(pose, inlier mask, rms)`` or None."""
     rp = ref.points[q[:, 0]]
     npts = new.points[q[:, 1]]
     rng = np.random.default_rng(config.seed)
     pose, mask = ransac_pose(rp, npts, config.ransac_threshold, config.ransac_iterations, rng,
-                             config.ransac_min_span)
+                             config.ransac_min_span, xq if config.ransac_weighted else None)
     if pose is None:
-        return _empty('RANSAC found no pose', len(L), score, pairs)
+        return None
     rms = math.nan
     if config.icp:
+        before = pose
         pose, _, rms = icp_point_to_line(ref.fine_points, ref.fine_normals, new.fine_points,
                                          pose, config.icp_iterations, config.icp_max_dist,
                                          config.icp_min_dist, ref_weights=ref.fine_weights,
@@ -159,16 +171,70 @@ def match_features(ref: ScanFeatures, new: ScanFeatures,
             pose, _ = mutual_nn_procrustes(ref.fine_points, new.fine_points, pose,
                                            config.polish_gate, config.polish_iterations,
                                            ref.fine_tree, new.fine_tree)
+        # safety net: never let the refinement lose overlap gained by RANSAC
+        if overlap(ref, new, pose, config.overlap_dist) < \
+                overlap(ref, new, before, config.overlap_dist) - 0.05:
+            pose = before
         c, s = math.cos(pose[2]), math.sin(pose[2])
         moved = npts @ np.array([[c, s], [-s, c]]) + np.array(pose[:2])
         mask2 = np.linalg.norm(rp - moved, axis=1) < config.ransac_threshold
         if mask2.sum() >= mask.sum() // 2:
             mask = mask2
+    return pose, mask, rms
+
+
+def match_features(ref: ScanFeatures, new: ScanFeatures,
+                   config: MatcherConfig | None = None) -> MatchResult:
+    """Match two prepared scans; never raises on degenerate input (returns ``ok=False``).
+
+    Beyond the paper: when the pose explains less than ``retry_overlap`` of the new scan, the
+    correspondences of that cluster are removed from G and the next cluster is tried (up to
+    ``retries`` times); the pose with the largest overlap wins. ``score`` is always eq. 5 of the
+    first (paper) solution.
+    """
+    config = config or MatcherConfig()
+    if ref.is_degenerate or new.is_degenerate:
+        return _empty('degenerate scan (fewer than 3 points or collinear)')
+    L, G, x, sel, score = _spectral(ref, new, config)
+    best = None
+    last = None
+    for attempt in range(1 + max(config.retries, 0)):
+        if attempt > 0:
+            if last is None:
+                break
+            prev = last  # the inlier pairs of the previous attempt
+            drop = np.isin(L[:, 0], prev[:, 0]) | np.isin(L[:, 1], prev[:, 1])
+            if attempt == 1:
+                G = G.copy()
+            G[drop, :] = 0.0
+            G[:, drop] = 0.0
+            x = leading_eigenvector(G, config.power_iterations, config.power_tol)
+            sel = binarize(x, L, config.binarize_min_ratio)
+        q = L[sel]
+        last = None
+        if len(q) < 2:
+            break
+        est = _estimate(ref, new, q, x[sel], config)
+        if est is None:
+            break
+        pose, mask, rms = est
+        last = q[mask]
+        ov = overlap(ref, new, pose, config.overlap_dist)
+        if best is None or ov > best[4]:
+            best = (pose, q, mask, rms, ov)
+        if ov >= config.retry_overlap:
+            break
+    if best is None:
+        q = L[sel] if len(L) else np.zeros((0, 2), dtype=np.int64)
+        pairs = np.column_stack((ref.source_index[q[:, 0]], new.source_index[q[:, 1]]))
+        return _empty('no pose (too few consistent correspondences)', len(L), score, pairs)
+    pose, q, mask, rms, ov = best
+    pairs = np.column_stack((ref.source_index[q[:, 0]], new.source_index[q[:, 1]]))
     inliers = pairs[mask]
     ok = bool(len(inliers) >= config.min_inliers)
     return MatchResult(pose=(float(pose[0]), float(pose[1]), float(pose[2])), pairs=pairs,
                        score=score, inliers=inliers, ok=ok, n_candidates=len(L),
-                       message='' if ok else f'only {len(inliers)} inliers', rms=rms)
+                       message='' if ok else f'only {len(inliers)} inliers', rms=rms, overlap=ov)
 
 
 def match_scans(ref_xy, new_xy, config: MatcherConfig | None = None) -> MatchResult:

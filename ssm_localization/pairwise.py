@@ -40,21 +40,21 @@ def affinity_matrix(ref_dist: np.ndarray, ref_angle: np.ndarray, new_dist: np.nd
     """
     ci = pairs[:, 0]
     cj = pairs[:, 1]
-    n = ref_dist.shape[0]
-    m = new_dist.shape[0]
-    fr = ci[:, None] * n + ci[None, :]
-    fn = cj[:, None] * m + cj[None, :]
-    dd = ref_dist.ravel().take(fr)
-    dd -= new_dist.ravel().take(fn)
-    da = ref_angle.ravel().take(fr)
-    da -= new_angle.ravel().take(fn)
+    # two-step gathers (rows, then columns) are much faster than one fancy index over L x L
+    dd = ref_dist.take(ci, axis=0).take(ci, axis=1)
+    dd -= new_dist.take(cj, axis=0).take(cj, axis=1)
+    da = ref_angle.take(ci, axis=0).take(ci, axis=1)
+    da -= new_angle.take(cj, axis=0).take(cj, axis=1)
     w0, w1, w2 = (np.float32(v) for v in w)
-    bad = np.abs(dd) > np.float32(max_dist_deform)
-    bad |= np.abs(da) > np.float32(max_angle_deform)
-    bad |= ci[:, None] == ci[None, :]
-    bad |= cj[:, None] == cj[None, :]
     dd *= dd
     da *= da
+    bad = dd > np.float32(max_dist_deform ** 2)
+    bad |= da > np.float32(max_angle_deform ** 2)
+    small = np.int16 if max(int(ci.max(initial=0)), int(cj.max(initial=0))) < 32767 else np.int64
+    i16 = ci.astype(small)
+    j16 = cj.astype(small)
+    bad |= i16[:, None] == i16[None, :]
+    bad |= j16[:, None] == j16[None, :]
     z = w1 * dd
     z += w2 * da
     z += w0

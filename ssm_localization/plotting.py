@@ -87,3 +87,53 @@ def plot_index(index, path, title: str = '', show_ids: bool = True) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def plot_match(ref_xy, new_xy, pose, out, pairs=None, truth=None, title: str = ''):
+    """Two panels: the scans as given (new scan drawn in the reference frame at ``truth`` if
+    known, else unaligned) and the new scan moved by the estimated ``pose`` over the reference,
+    with the ``pairs`` (K, 2) correspondences (indices into ref_xy / new_xy) as segments.
+    Writes a PNG to ``out`` and returns its path."""
+    import numpy as np
+    from pathlib import Path
+
+    from .transforms import apply
+    plt = _pyplot()
+    ref = np.asarray(ref_xy, float).reshape(-1, 2)
+    new = np.asarray(new_xy, float).reshape(-1, 2)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 6.2))
+    ax = axes[0]
+    ax.plot(ref[:, 0], ref[:, 1], '.', color='tab:red', ms=3, label='reference')
+    ax.plot(new[:, 0], new[:, 1], '.', color='tab:blue', ms=3, label='new (as given)')
+    ax.set_title('before matching')
+    ax = axes[1]
+    ok = pose is not None and np.all(np.isfinite(pose))
+    moved = apply(pose, new) if ok else new
+    if pairs is not None and len(pairs) and ok:
+        pr = np.asarray(pairs, int)
+        segs = np.stack((ref[pr[:, 0]], moved[pr[:, 1]]), axis=1)
+        from matplotlib.collections import LineCollection
+        ax.add_collection(LineCollection(segs, colors='0.6', linewidths=0.6,
+                                         label=f'{len(pr)} correspondences'))
+    ax.plot(ref[:, 0], ref[:, 1], '.', color='tab:red', ms=3, label='reference')
+    ax.plot(moved[:, 0], moved[:, 1], '.', color='tab:blue', ms=3, label='new at estimate')
+    if truth is not None:
+        tt = apply(truth, new)
+        ax.plot(tt[:, 0], tt[:, 1], '.', color='tab:green', ms=1.5, alpha=0.5,
+                label='new at truth')
+    ax.set_title('after matching' if ok else 'matching failed')
+    for ax in axes:
+        ax.plot(0, 0, 'k^', ms=8)
+        ax.set_aspect('equal', adjustable='datalim')
+        ax.grid(True, lw=0.3)
+        ax.set_xlabel('x [m]')
+        ax.legend(loc='best', fontsize=8)
+    axes[0].set_ylabel('y [m]')
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

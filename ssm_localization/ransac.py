@@ -46,21 +46,36 @@ def procrustes(ref: np.ndarray, new: np.ndarray, weights: np.ndarray | None = No
 
 
 def ransac_pose(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: int,
-                rng: np.random.Generator, min_span: float = 0.2):
+                rng: np.random.Generator, min_span: float = 0.2,
+                weights: np.ndarray | None = None):
     """2-point RANSAC over correspondences ``ref[k] <-> new[k]`` (II.C steps 1-4).
 
     All ``iterations`` hypotheses are drawn and scored at once (eqs. 7-8); pairs closer than
     ``min_span`` or whose lengths differ by more than ``2 * threshold`` are skipped. The best
     hypothesis (most supports, then least residual) is refined by least squares on its inliers,
-    twice (re-collecting inliers). Returns ``(pose, inlier_mask)`` or ``(None, empty mask)``.
+    twice (re-collecting inliers). With ``weights`` (e.g. the eigenvector x* of eq. 6, beyond
+    the paper) pairs are drawn with probability proportional to their weight and the support of
+    a hypothesis is the summed weight of its inliers instead of their count.
+    Returns ``(pose, inlier_mask)`` or ``(None, empty mask)``.
     """
     k = len(ref)
     none = (None, np.zeros(k, dtype=bool))
     if k < 2:
         return none
-    a = rng.integers(0, k, iterations)
-    b = rng.integers(0, k - 1, iterations)
-    b += b >= a
+    if weights is None:
+        a = rng.integers(0, k, iterations)
+        b = rng.integers(0, k - 1, iterations)
+        b += b >= a
+        wv = np.ones(k)
+    else:
+        wv = np.maximum(np.asarray(weights, float), 0.0)
+        if wv.sum() <= 0.0:
+            wv = np.ones(k)
+        p = wv / wv.sum()
+        a = rng.choice(k, iterations, p=p)
+        b = rng.choice(k, iterations, p=p)
+        same = a == b
+        b[same] = (b[same] + 1 + rng.integers(0, k - 1, same.sum())) % k
     lr = np.linalg.norm(ref[a] - ref[b], axis=1)
     ln = np.linalg.norm(new[a] - new[b], axis=1)
     good = (lr > min_span) & (np.abs(lr - ln) < 2.0 * threshold)
@@ -73,7 +88,7 @@ def ransac_pose(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: 
     py = s[:, None] * new[None, :, 0] + c[:, None] * new[None, :, 1] + poses[:, 1:2]
     r2 = (px - ref[None, :, 0]) ** 2 + (py - ref[None, :, 1]) ** 2
     inl = r2 < threshold * threshold
-    support = inl.sum(axis=1)
+    support = inl @ wv
     cost = np.where(inl, r2, threshold * threshold).sum(axis=1)
     best = int(np.lexsort((cost, -support))[0])
     mask = inl[best]
@@ -99,15 +114,17 @@ def _apply(pose, pts: np.ndarray) -> np.ndarray:
 def icp_point_to_line(ref: np.ndarray, ref_normals: np.ndarray, new: np.ndarray, pose,
                       iterations: int = 15, max_dist: float = 0.3, min_dist: float = 0.05,
                       ref_weights: np.ndarray | None = None, tree=None, damping: float = 1e-4,
-                      tol: float = 1e-5):
+                      tol: float = 1e-5, max_step: tuple[float, float] = (0.05, 0.03)):
     """Refine ``pose`` by point-to-line ICP (beyond the paper: real scans do not share points).
 
     Each iteration pairs every transformed new point with its nearest reference point (k-d tree),
     keeps pairs closer than a gate (``max_dist`` first, then 3x the median pair distance clipped
     to [min_dist, max_dist]) and solves the damped, weighted Gauss-Newton step of
     ``sum w_i (n_i . (R p' + t - p_i))^2`` for a left increment. ``ref_weights`` (e.g. normal
-    quality, 0 at corners) scale each reference point. Stops after ``iterations`` or when the
-    step is below ``tol`` (metres / radians). Returns ``(pose, n_pairs, rms)``.
+    quality, 0 at corners) scale each reference point. Each step is clamped to ``max_step``
+    (metres, radians): a trust region against ill-conditioned (corridor) steps. Stops after
+    ``iterations`` or when the step is below ``tol`` (metres / radians).
+    Returns ``(pose, n_pairs, rms)``.
     """
     pose = tuple(float(v) for v in pose)
     if len(ref) < 3 or len(new) < 3:
@@ -138,6 +155,10 @@ def icp_point_to_line(ref: np.ndarray, ref_normals: np.ndarray, new: np.ndarray,
         J = np.column_stack((nk, nk[:, 1] * qk[:, 0] - nk[:, 0] * qk[:, 1]))
         Jw = J * w[:, None]
         delta = -np.linalg.solve(Jw.T @ J + (damping * sw) * eye, Jw.T @ e)
+        st = math.hypot(delta[0], delta[1])
+        if st > max_step[0]:
+            delta[:2] *= max_step[0] / st
+        delta[2] = min(max(delta[2], -max_step[1]), max_step[1])
         rms = float(np.sqrt((w * e * e).sum() / sw))
         pose = compose((float(delta[0]), float(delta[1]), float(delta[2])), pose)
         if abs(delta[0]) + abs(delta[1]) < tol and abs(delta[2]) < tol:

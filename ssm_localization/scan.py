@@ -138,18 +138,23 @@ def tangents(points: np.ndarray, gap: float, direction: float = 1.0) -> np.ndarr
     return direction * u / norm[:, None]
 
 
-def local_normals(points: np.ndarray, radius: float, half_window: int = 4
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def local_normals(points: np.ndarray, radius: float, half_window: int = 4,
+                  max_radius: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals (N, 2) by PCA of the scan-order neighbours within ``radius`` and weights (N,).
 
     Neighbours are taken among the ``half_window`` points on each side (scan order) that lie
-    within ``radius``, so normals do not bridge gaps. The weight ``1 - l_min / l_max`` (1 on a
-    straight wall, ~0 at corners or for isolated points) lets ICP ignore ill-defined normals.
+    within ``radius`` -- grown to 3x the distance to the nearest scan neighbour, at most
+    ``max_radius``, where the scan is sparse -- so normals do not bridge gaps. The weight ``1 - 3 l_min / l_max`` clipped to
+    [0, 1] (1 on a straight wall, 0 at corners or for isolated points) lets ICP ignore
+    ill-defined normals.
     """
     p = np.asarray(points, dtype=float)
     n = len(p)
     if n == 0:
         return np.zeros((0, 2)), np.zeros(0)
+    step = np.linalg.norm(np.diff(p, axis=0), axis=1) if n > 1 else np.zeros(0)
+    near = np.minimum(np.r_[step, np.inf], np.r_[np.inf, step]) if n > 1 else np.zeros(n)
+    rad = np.clip(3.0 * near, radius, max(max_radius, radius))
     sxx = np.zeros(n)
     sxy = np.zeros(n)
     syy = np.zeros(n)
@@ -158,8 +163,10 @@ def local_normals(points: np.ndarray, radius: float, half_window: int = 4
     cnt = np.zeros(n)
     for k in range(-half_window, half_window + 1):
         lo, hi = max(0, -k), min(n, n - k)       # i in [lo, hi) has neighbour i + k
+        if hi <= lo:
+            continue
         q = p[lo + k:hi + k]
-        ok = np.linalg.norm(q - p[lo:hi], axis=1) <= radius
+        ok = np.linalg.norm(q - p[lo:hi], axis=1) <= rad[lo:hi]
         x = np.where(ok, q[:, 0] - p[lo:hi, 0], 0.0)
         y = np.where(ok, q[:, 1] - p[lo:hi, 1], 0.0)
         cnt[lo:hi] += ok
@@ -182,18 +189,33 @@ def local_normals(points: np.ndarray, radius: float, half_window: int = 4
     tn = np.hypot(tx, ty)
     tn[tn == 0.0] = 1.0
     normals = np.column_stack((-ty / tn, tx / tn))
-    w = np.where((cnt >= 3) & (lmax > 0.0), 1.0 - lmin / np.where(lmax > 0.0, lmax, 1.0), 0.0)
+    ratio = lmin / np.where(lmax > 0.0, lmax, 1.0)
+    w = np.where((cnt >= 3) & (lmax > 0.0), np.clip(1.0 - 3.0 * ratio, 0.0, 1.0), 0.0)
     return normals, w
 
 
+def length_weights(points: np.ndarray, spacing: float, cap: float) -> np.ndarray:
+    """Scan length each point stands for: the distance to its nearer scan-order neighbour,
+    clipped to ``[spacing, cap]`` (so isolated points and jumps count at most ``cap``)."""
+    n = len(points)
+    if n < 2:
+        return np.full(n, spacing)
+    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    near = np.minimum(np.r_[step, np.inf], np.r_[np.inf, step])
+    return np.clip(near, spacing, max(cap, spacing))
+
+
 def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
-                    direction: float = 1.0, offsets=None) -> np.ndarray:
+                    direction: float = 1.0, offsets=None, min_neighbours: int = 4,
+                    max_radius: float = 1.0) -> np.ndarray:
     """Unit tangents (N, 2) at ``points`` from a PCA of the ``context`` points within ``radius``.
 
     The noise- and outlier-robust form of eq. 1 used by default: the principal direction of the
     neighbourhood, oriented like ``p_{i+1} - p_{i-1}`` would be for a counterclockwise sweep
     (``cross(p_i, u_i) >= 0``; flipped for ``direction=-1``). Needs the sensor at the origin of
-    the points' frame, as scans are. Points with fewer than 2 neighbours get the sweep direction.
+    the points' frame, as scans are. The neighbourhood grows beyond ``radius`` to hold
+    ``min_neighbours`` points (up to ``max_radius``): sparse walls seen at grazing angles.
+    Points with fewer than 2 neighbours get the sweep direction.
     ``offsets`` may pass precomputed ``(dx, dy)`` = context - points, each (N, C).
     """
     p = np.asarray(points, dtype=float)
@@ -205,7 +227,14 @@ def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
         dy = context[None, :, 1] - p[:, None, 1]
     else:
         dx, dy = offsets
-    m = (dx * dx + dy * dy < radius * radius).astype(float)
+    d2 = dx * dx + dy * dy
+    # radius grown to the min_neighbours-th nearest context point (sparse, grazing walls)
+    kk = min(min_neighbours, d2.shape[1]) - 1
+    r2 = np.full(n, radius * radius)
+    if kk >= 1:
+        kth = np.partition(d2, kk, axis=1)[:, kk]
+        r2 = np.clip(kth * 1.0001, radius * radius, max_radius * max_radius)
+    m = (d2 <= r2[:, None]).astype(float)
     cnt = m.sum(axis=1)
     c = np.maximum(cnt, 1.0)
     mx = (m * dx).sum(axis=1) / c
@@ -331,18 +360,21 @@ def prepare_scan(points_xy, config: 'MatcherConfig | None' = None) -> ScanFeatur
     p = as_points(points_xy)
     src = np.flatnonzero(np.isfinite(p).all(axis=1))
     p = p[src]
-    direction = sweep_direction(p)
     keep = downsample_even(p, config.max_points, config.min_spacing)
     pts = p[keep]
     src = src[keep]
     ctx = p[downsample_even(p, 4 * config.max_points, config.context_spacing)]
     offsets = (ctx[None, :, 0] - pts[:, None, 0], ctx[None, :, 1] - pts[:, None, 1])
     if config.tangent_method == 'eq1':
-        u = tangents(pts, config.gap, direction)
+        u = tangents(pts, config.gap, sweep_direction(p))
     else:
-        u = robust_tangents(pts, ctx, config.tangent_radius, direction, offsets)
+        # oriented geometrically (counterclockwise about the sensor): no scan order involved,
+        # so interleaved outliers or a clockwise scanner cannot flip it
+        u = robust_tangents(pts, ctx, config.tangent_radius, 1.0, offsets)
     desc = shape_context(pts, u, config.desc_radius, config.desc_radial_bins,
-                         config.desc_angular_bins, context=ctx, offsets=offsets)
+                         config.desc_angular_bins, context=ctx, offsets=offsets,
+                         weights=length_weights(ctx, config.context_spacing, config.length_cap)
+                         if config.length_cap > 0 else None)
     fine = p[downsample_even(p, config.icp_max_points, config.icp_min_spacing)]
     fn, fw = local_normals(fine, config.normal_radius)
     return ScanFeatures(points=pts, tangents=u, descriptors=desc, source_index=src,

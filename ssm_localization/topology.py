@@ -9,11 +9,16 @@ Algorithm (all vectorized numpy/scipy):
    passages narrower than twice that are ignored.
 2. GVD: a traversable cell is on the generalized Voronoi diagram when it and a neighbour have
    nearest obstacle cells far apart, i.e. it is equidistant to two distinct obstacle points
-   (feature separation ``> ridge_ratio * clearance``, at least 2 cells). The resulting ridge is
-   thinned to a one-pixel, 8-connected skeleton (Guo-Hall parallel thinning, which preserves the
-   topology of the free space).
-3. Spurs (short terminal arcs, e.g. the bisectors running into concave room corners) are pruned
-   when shorter than ``max(min_spur_length, spur_factor * clearance of their junction)``.
+   (feature separation ``> ridge_ratio * clearance`` and > 3 cells). Walls are usually one
+   connected obstacle, so obstacle *points*, not components, are compared. The ridge is thinned
+   to a one-pixel, 8-connected skeleton (Guo-Hall parallel thinning); junctions and arcs come
+   from its 8-neighbour graph (diagonal links that short-cut a 4-neighbour are dropped).
+3. Pruning: spurs (terminal arcs, e.g. the bisectors running into concave room corners) shorter
+   than ``max(min_spur_length, spur_factor * clearance of their junction)`` are removed, that
+   limit times ``weak_spur_factor`` for weak arcs (obstacle points subtending < 60 deg on most
+   pixels: wall noise); so are free-standing weak arcs and skeleton pieces shorter than
+   ``min_spur_length``. Repeated until stable. Known limit: where a doorway opens into a room deeper than ~1/ridge_ratio door
+   widths the arc through the door can break; the room's GVD then ends in dead-end nodes.
 4. Nodes: *branch* nodes where three or more arcs meet (the paper's only kind; nodes closer than
    ``merge_radius`` are merged), plus configurable extras that cover places where branch nodes
    alone fail: *dead ends* of arcs, one *region* node (at the point of maximum clearance) for
@@ -55,10 +60,11 @@ class TopologyConfig:
     ``min_clearance``: robot radius; cells nearer an obstacle are not traversable.
     ``free_thresh``: occupancy at or below which a cell is free (others, unknown included, are
     obstacles). ``ridge_ratio``: minimum separation of the two nearest obstacle points, as a
-    fraction of the clearance, for a cell to be on the GVD (1.0 = they subtend >= 60 deg).
-    ``spur_factor`` / ``min_spur_length``: spur pruning (see module doc). ``merge_radius``:
-    nodes closer than this are merged. ``dead_end_nodes``, ``region_nodes``: enable the extras;
-    ``arc_spacing``: maximum geodesic spacing of nodes along the GVD (0 disables arc nodes).
+    fraction of the clearance, for a cell to be on the GVD (0.5: they subtend >= 29 deg).
+    ``spur_factor``, ``weak_spur_factor``, ``min_spur_length``: pruning (module doc).
+    ``merge_radius``: nodes closer than this are merged. ``dead_end_nodes``, ``region_nodes``:
+    enable the extras; ``arc_spacing``: maximum geodesic spacing of nodes along the GVD
+    (0 disables arc nodes).
     ``min_region_area``: free regions smaller than this (m^2) get no region node.
     """
 
@@ -76,8 +82,7 @@ class TopologyConfig:
 
     def __post_init__(self) -> None:
         for name in ('min_clearance', 'ridge_ratio', 'spur_factor', 'weak_spur_factor',
-                     'min_spur_length',
-                     'merge_radius', 'arc_spacing', 'min_region_area'):
+                     'min_spur_length', 'merge_radius', 'arc_spacing', 'min_region_area'):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ValueError(f'TopologyConfig.{name}: expected a number >= 0, got {v!r}')
@@ -196,7 +201,8 @@ class _Skeleton:
     adj: np.ndarray        # (M, 2) unique (arc, cluster) contacts
 
 
-def _components(n: int, er: np.ndarray, ec: np.ndarray, keep: np.ndarray) -> tuple[int, np.ndarray]:
+def _components(n: int, er: np.ndarray, ec: np.ndarray,
+                keep: np.ndarray) -> tuple[int, np.ndarray]:
     sel = keep[er] & keep[ec]
     g = coo_matrix((np.ones(int(sel.sum())), (er[sel], ec[sel])), shape=(n, n))
     _, lab = connected_components(g, directed=False)
@@ -259,6 +265,14 @@ def build_topology(occ_map: OccupancyMap, config: TopologyConfig | None = None,
         np.maximum(strength[sp], ratio, out=strength[sp])
         np.maximum(strength[sq], ratio, out=strength[sq])
     del feat
+    # A GVD loop always encloses an obstacle: fill the ridge's holes that hold only free cells
+    # (staircase walls make tiny ones), so thinning does not keep them as cycles.
+    holes, n_holes = ndimage.label(~ridge)
+    if n_holes > 1:
+        keep = np.bincount(holes[~free], minlength=n_holes + 1) > 0
+        keep[0] = True
+        ridge |= ~keep[holes]
+    del holes
     mask = ridge.ravel()
     ring = _ring(wp)
     _thin(mask, ring)
@@ -287,6 +301,7 @@ def build_topology(occ_map: OccupancyMap, config: TopologyConfig | None = None,
         weak = np.bincount(sk.arc[on_arc], weights=sflat[sk.idx[on_arc]] < 1.0,
                            minlength=sk.n_arcs) > 0.5 * np.maximum(arc_len / res, 1)
         limit = np.where(weak, limit * cfg.weak_spur_factor, limit)
+        limit[weak & (n_adj == 0)] = np.inf  # a free-standing weak arc is wall noise
         spur = has_end & (n_adj <= 1) & (arc_len < limit)
         # an isolated junction cluster (all its arcs pruned earlier) is noise too
         lone = np.zeros(max(sk.n_clusters, 1), dtype=bool)

@@ -168,7 +168,8 @@ def synthetic_map(variant: int = 0):
     data = np.zeros((140, 200), np.int8)
 
     def box(x0: float, y0: float, x1: float, y1: float) -> None:
-        data[int(round(y0 / res)):int(round(y1 / res)), int(round(x0 / res)):int(round(x1 / res))] = 100
+        r0, r1, c0, c1 = (int(round(v / res)) for v in (y0, y1, x0, x1))
+        data[r0:r1, c0:c1] = 100
     box(0, 0, 10, 0.1), box(0, 6.9, 10, 7), box(0, 0, 0.1, 7), box(9.9, 0, 10, 7)
     box(4.0, 0, 4.1, 3.0), box(4.0, 4.0, 4.1, 7)          # wall with a door at y 3..4
     box(7.0, 0, 7.1, 1.0), box(7.0, 2.0, 7.1, 7)          # wall with a door at y 1..2

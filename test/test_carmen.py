@@ -120,3 +120,17 @@ def test_convert_intel(tmp_path):
     assert data.odom[s.stamp] == pytest.approx(tuple(log.odometry[1]), abs=1e-9)
     with pytest.raises(FileExistsError):
         carmen.convert_carmen(_log_path('intel'), tmp_path, every=25, last=400)
+
+
+def test_odometry_without_reset_lines(tmp_path):
+    """A log whose ODOM lines are plain raw odometry: increments chain from scan to scan."""
+    log = tmp_path / 'raw.log'
+    log.write_text('ODOM 0 0 0 0 0 0 0.5 h 0.5\n'
+                   'FLASER 3 1.0 2.0 9.0 0 0 0 0 0 0 1.0 h 1.0\n'
+                   'ODOM 1 0 0 0 0 0 1.5 h 1.5\nODOM 2 0 0.5 0 0 0 1.6 h 1.6\n'
+                   'FLASER 3 1.0 2.0 9.0 5 5 0 5 5 0 2.0 h 2.0\n'
+                   'ODOM 3 0 0.5 0 0 0 2.5 h 2.5\n'
+                   'FLASER 3 1.0 2.0 9.0 5 5 0 5 5 0 3.0 h 3.0\n')
+    parsed = carmen.read_carmen_log(log, max_range=9.0)
+    np.testing.assert_allclose(parsed.odometry, [[0, 0, 0], [2, 0, 0.5], [3, 0, 0.5]], atol=1e-12)
+    assert np.isinf(parsed.ranges[:, 2]).all() and parsed.ranges[0, 0] == 1.0

@@ -122,3 +122,52 @@ def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
         code = localizer.stop()
     assert code == 0, node_log.read_text()
     assert 'Traceback' not in node_log.read_text()
+
+
+def test_map_indexer_process_writes_index_that_global_localizer_loads(ros, tmp_path):
+    """map_indexer indexes the bag's map into a file; global_localizer starts from that file
+    (no map topic needed) and relocalizes a scan played from the bag."""
+    from ssm_localization.bags import read_bag
+    from ssm_localization.index import load_index
+    bag = find_bag('depot_sim')
+    data = read_bag(bag)
+    index_file = tmp_path / 'depot_index.npz'
+    indexer = Proc([venv_bin('map_indexer'), '--ros-args', '--params-file', PARAMS,
+                    '-p', f'index_file:={index_file}'], tmp_path / 'map_indexer.log')
+    procs = [indexer]
+    try:
+        marks = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
+        procs.append(Proc([venv_bin('ssm_localization'), 'play', bag, '--topics', '/map',
+                           '--hold', '30', '--delay', '0.2'], tmp_path / 'play_map.log'))
+        assert ros.wait_for(index_file.exists, 120), indexer.text()
+        assert ros.wait_for(lambda: any(any(m.ns == 'nodes' for m in a.markers) for a in marks),
+                            30), indexer.text()
+        for p in procs[1:]:
+            p.stop()
+        assert indexer.stop() == 0, indexer.text()
+        index = load_index(index_file)
+        assert len(index.node_xy) > 10
+
+        localizer = Proc([venv_bin('global_localizer'), '--ros-args', '--params-file', PARAMS,
+                          '-p', f'index_file:={index_file}', '-p', 'scan_timeout:=10.0'],
+                         tmp_path / 'global_localizer.log')
+        procs.append(localizer)
+        k = next(i for i, s in enumerate(data.scans) if s.stamp in data.ground_truth)
+        procs.append(_play_one_scan(bag, data, k, tmp_path / 'play_scan.log'))
+        client = ros.node.create_client(Trigger, 'relocalize')
+        assert client.wait_for_service(timeout_sec=20.0), localizer.text()
+        res = None
+        for _ in range(60):                     # until the index file is loaded
+            res = _relocalize(ros, client)
+            if res is not None and 'no map/index' not in res.message \
+                    and 'indexing in progress' not in res.message:
+                break
+            time.sleep(0.5)
+        assert res is not None and res.success, f'{res}\n{localizer.text()}'
+        assert 'loaded' in localizer.text() and 'a map on' not in localizer.text()
+        x, y, yaw = (float(v.split('=')[1]) for v in res.message.split()[:3])
+        tx, ty, tyaw = data.ground_truth[data.scans[k].stamp]
+        assert math.hypot(x - tx, y - ty) < 0.15 and abs(float(wrap_angle(yaw - tyaw))) < 0.05
+    finally:
+        for p in procs:
+            p.stop()

@@ -126,6 +126,34 @@ def test_map_indexer_markers_index_file_and_newest_map_wins(ros, tmp_path):
     assert all(_has_nodes(a) for a in got[n_before:])
 
 
+def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
+    import ssm_localization.index as index_mod
+    from ssm_localization.ros.map_indexer import MapIndexerNode
+    real_build = index_mod.build_index
+    started = []
+
+    def slow_build(occ, config=None, progress=None):
+        started.append(occ)
+        for i in range(10):
+            time.sleep(0.1)
+            progress(i, 100, 'slow test build')
+        return real_build(occ, config, progress)
+    monkeypatch.setattr(index_mod, 'build_index', slow_build)
+    node = ros.add(MapIndexerNode(context=ros.context))
+    got = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
+    pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
+    first, second = synthetic_map(0), synthetic_map(3)
+    pub.publish(occupancy_grid_from_map(first))
+    assert ros.wait_for(lambda: started, 10)
+    pub.publish(occupancy_grid_from_map(second))
+    assert ros.wait_for(lambda: node.index is not None and not node.builder.busy, 60)
+    assert np.array_equal(node.index.map.data, second.data)
+    assert len(started) == 2
+    assert 'dropped, a newer map arrived' in capfd.readouterr().err
+    time.sleep(0.3)
+    assert len([a for a in got if _has_nodes(a)]) == 1     # only the complete, newest index
+
+
 def test_map_indexer_ignores_bad_maps(ros):
     from ssm_localization.map_io import OccupancyMap
     from ssm_localization.ros.map_indexer import MapIndexerNode
@@ -145,7 +173,7 @@ def test_relocalize_before_map_fails_with_reason(ros):
     assert 'no map' in res.message and 'map' in res.message
 
 
-def test_localizer_service_bad_input_and_kidnapping(ros):
+def test_localizer_service_bad_input_and_kidnapping(ros, capfd):
     """Indexing-in-progress answer, bad scans rejected, then good relocalizations (kidnapped)."""
     occ = synthetic_map(0)
     sim = _simulated(occ, count=8)
@@ -175,10 +203,12 @@ def test_localizer_service_bad_input_and_kidnapping(ros):
     bad.append(inf)
     zero = laser_scan_from_record(sim.scans[0]); zero.angle_increment = 0.0
     bad.append(zero)
+    capfd.readouterr()
     for scan in bad:
         res = loc.relocalize(scan)
         assert not res.success and res.message.startswith('bad scan'), res.message
     assert not loc.poses, 'nothing may be published for bad scans'
+    assert 'skipping scan' in capfd.readouterr().err        # logged as a warning
 
     # a mirrored scan (negative increment, reversed ranges) is the same scan: still localizes
     k0 = 0
@@ -214,7 +244,29 @@ def test_localizer_service_bad_input_and_kidnapping(ros):
     assert cands and scan_pts and len(scan_pts[0].points) > 10
 
 
-def test_localizer_survives_bad_maps_and_reindexes_new_map(ros):
+def test_service_answers_while_indexing(ros, monkeypatch):
+    """A relocalize call during indexing fails at once with 'indexing in progress'."""
+    import ssm_localization.index as index_mod
+    real_build = index_mod.build_index
+
+    def slow_build(occ, config=None, progress=None):     # a big map, deterministically
+        for i in range(20):
+            time.sleep(0.1)
+            if progress is not None:
+                progress(i, 100, 'slow test build')
+        return real_build(occ, config, progress)
+    monkeypatch.setattr(index_mod, 'build_index', slow_build)
+    loc = Localizer(ros)
+    loc.publish_map(synthetic_map(0))
+    assert ros.wait_for(lambda: loc.node.builder.busy, 10)
+    t0 = time.monotonic()
+    res = loc.relocalize(None, timeout=10)
+    assert not res.success and 'indexing in progress' in res.message, res.message
+    assert time.monotonic() - t0 < 1.5
+    assert loc.wait_ready(60)
+
+
+def test_localizer_survives_bad_maps_and_reindexes_new_map(ros, capfd):
     from ssm_localization.map_io import OccupancyMap
     occ = synthetic_map(0)
     sim = _simulated(occ, count=2, seed=11)
@@ -233,7 +285,10 @@ def test_localizer_survives_bad_maps_and_reindexes_new_map(ros):
     huge.info.width = huge.info.height = 100_000
     huge.info.resolution = 0.05
     loc.publish_map(huge)
-    time.sleep(0.5)
+    walled = np.full((12, 12), 100, np.int8)
+    walled[4:8, 4:8] = 0                       # free cells, but no room for a single node
+    loc.publish_map(OccupancyMap(walled, 0.05))
+    assert ros.wait_for(lambda: 'indexing failed' in capfd.readouterr().err, 10)
     assert loc.node._localizer is first_localizer and not loc.node.builder.busy
     res = loc.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message
@@ -253,6 +308,22 @@ def test_localizer_survives_bad_maps_and_reindexes_new_map(ros):
     res = loc.relocalize(laser_scan_from_record(sim2.scans[0]))
     assert res.success, res.message
     assert _close(pose_from_msg(loc.poses[-1].pose.pose), sim2.poses[0])
+
+
+def test_index_file_is_saved_then_loaded_without_a_map(ros, tmp_path):
+    occ = synthetic_map(1)
+    sim = _simulated(occ, count=1, seed=21)
+    index_file = tmp_path / 'cache' / 'index.npz'
+    first = Localizer(ros, index_file=str(index_file))     # missing: index the map, save it
+    first.publish_map(occ)
+    assert first.wait_ready() and ros.wait_for(index_file.exists, 10)
+    ros.remove(first.node)
+    second = Localizer(ros, index_file=str(index_file))    # present: no map subscription
+    assert second.wait_ready()
+    assert not any(s.topic_name == '/map' for s in second.node.subscriptions)
+    res = second.relocalize(laser_scan_from_record(sim.scans[0]))
+    assert res.success, res.message
+    assert _close(pose_from_msg(second.poses[-1].pose.pose), sim.poses[0])
 
 
 def test_continuous_mode_takes_newest_scan(ros):
@@ -276,7 +347,21 @@ def test_continuous_mode_takes_newest_scan(ros):
     assert ok == len(loc.poses)
 
 
-@pytest.mark.slow
+def test_continuous_mode_rate_limit(ros):
+    occ = synthetic_map(0)
+    sim = _simulated(occ, count=1, seed=9)
+    loc = Localizer(ros, mode='continuous', rate=2.0)
+    loc.publish_map(occ)
+    assert loc.wait_ready()
+    scan = laser_scan_from_record(sim.scans[0])
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 2.0:          # 40 scans in 2 s at 20 Hz
+        loc.scan_pub.publish(scan)
+        time.sleep(0.05)
+    time.sleep(0.3)
+    assert 2 <= len(loc.poses) <= 6, len(loc.poses)
+
+
 @pytest.mark.parametrize('bag_name', ['depot_sim', 'intel_queries'])
 def test_localize_bag_scans_against_ground_truth(ros, bag_name):
     """Scans of a committed bag fed over ROS; published poses checked against /ground_truth."""

@@ -1,9 +1,11 @@
 """``ssm_localization bench index``: index build time and peak memory per map.
 
 Every map is indexed in a fresh subprocess (``python -m ssm_localization.bench.index --worker
-SPEC``) so that its peak RSS (``ru_maxrss``) is honest; the table shows the build wall time, the
-peak RSS of the process and its increase during the build (after imports and map loading).
-Maps: the shared nav2 maps, maps built from the shared CARMEN logs (when present), any
+SPEC``) so that its peak RSS is honest; the table shows the build wall time, the peak RSS of the
+process during the build (``VmHWM`` from /proc, reset after imports and map loading) and its
+increase over the RSS before the build.
+Maps: the shared nav2 maps, maps built from the shared CARMEN logs (when present; built by
+``carmen.build_map`` with its defaults, saved as YAML+PGM in a temporary directory), any
 ``--extra MAP.yaml`` and a deterministic synthetic 100 m x 100 m office at 0.05 m (2000 x 2000).
 Targets (2-core machine): depot / turtlebot3_world < 1 s; the office < 10 s and < 1 GB.
 """
@@ -13,6 +15,7 @@ import argparse
 import json
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 SHARED = Path(__file__).resolve().parents[3] / 'shared' / 'data'
@@ -95,26 +98,45 @@ def office_map(size: float = 100.0, resolution: float = 0.05, seed: int = 0):
 def _load(spec: str):
     if spec.startswith('office'):
         return office_map()
-    if spec.startswith('carmen:'):
-        from ..carmen import build_map, read_carmen_log
-        return build_map(read_carmen_log(spec[len('carmen:'):]))
     from ..map_io import load_map_yaml
     return load_map_yaml(spec)
 
 
+def _rss_kb(field: str) -> float:
+    """VmRSS / VmHWM (kB) of this process from /proc (ru_maxrss where /proc is missing; note
+    that ru_maxrss can carry the parent's peak over fork + exec)."""
+    try:
+        for line in Path('/proc/self/status').read_text().splitlines():
+            if line.startswith(field + ':'):
+                return float(line.split()[1])
+    except OSError:
+        pass
+    import resource
+    return float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+
+
+def _reset_peak() -> None:
+    """Reset VmHWM to the current RSS (Linux: ``echo 5 > /proc/self/clear_refs``)."""
+    try:
+        Path('/proc/self/clear_refs').write_text('5')
+    except OSError:
+        pass
+
+
 def _worker(spec: str) -> None:
     """Index one map in this process and print one JSON line."""
-    import resource
     import time
 
     from ..index import build_index
     occ_map = _load(spec)
-    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    base = _rss_kb('VmRSS')
+    _reset_peak()
     t0 = time.perf_counter()
     index = build_index(occ_map)
     elapsed = time.perf_counter() - t0
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    print(json.dumps({'time': elapsed, 'peak_mb': peak / 1024.0, 'delta_mb': (peak - base) / 1024.0,
+    peak = _rss_kb('VmHWM')
+    print(json.dumps({'time': elapsed, 'peak_mb': peak / 1024.0,
+                      'delta_mb': (peak - base) / 1024.0,
                       'nodes': len(index), 'kinds': index.kind_counts(),
                       'cells': f'{occ_map.width}x{occ_map.height}',
                       'res': occ_map.resolution}))
@@ -137,9 +159,15 @@ def run(args: argparse.Namespace) -> int:
     for name in ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room'):
         if (maps / f'{name}.yaml').is_file():
             specs.append((name, str(maps / f'{name}.yaml')))
-    if not args.no_carmen:
+    tmp = tempfile.TemporaryDirectory(prefix='ssm_bench_index_')
+    if not args.no_carmen:  # built here, so the worker's peak is the index build alone
+        from ..carmen import build_map, read_carmen_log
+        from ..map_io import save_map_yaml
         for log in sorted((SHARED / 'carmen').glob('*.log.gz')):
-            specs.append((log.name.split('-corrected')[0], f'carmen:{log}'))
+            name = log.name.split('-corrected')[0]
+            yaml_path = Path(tmp.name) / f'{name}.yaml'
+            save_map_yaml(build_map(read_carmen_log(log)), yaml_path)
+            specs.append((name, str(yaml_path)))
     for extra in args.extra:
         if not Path(extra).is_file():
             raise FileNotFoundError(f'--extra map not found: {extra}')
@@ -171,6 +199,7 @@ def run(args: argparse.Namespace) -> int:
                 (f', < {mb_max:g} MB)' if mb_max else ')')
         print(f'{name:18s} {best["cells"]:>11s} {best["res"]:5.2f} {best["nodes"]:6d} '
               f'{best["time"]:8.2f} {best["peak_mb"]:8.0f} {best["delta_mb"]:7.0f}  {verdict}')
+    tmp.cleanup()
     return 1 if failed else 0
 
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-SCANS = {'intel': ('intel-corrected.log.gz', 300), 'freiburg-079': ('freiburg-079-corrected.log.gz', 1000)}
+SCANS = {'intel': ('intel-corrected.log.gz', 26), 'freiburg-079': ('freiburg-079-corrected.log.gz', 1000)}
 POS_TOL, ANG_TOL = 0.05, np.deg2rad(1.0)            # Table 2 / Fig. 4 success
 REAL_POS_TOL, REAL_ANG_TOL = 0.15, np.deg2rad(3.0)  # real pairs success
 CORRECT_TOL = 0.1                                   # a pair (i, i') is correct within this
@@ -31,6 +31,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--quick', action='store_true', help='few trials (well under a minute)')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--scans', nargs='+', default=list(SCANS), choices=list(SCANS))
+    parser.add_argument('--intel-scan', type=int, default=SCANS['intel'][1],
+                        help='Intel scan used for Table 2 / Fig. 4 (default %(default)s)')
+    parser.add_argument('--freiburg-scan', type=int, default=SCANS['freiburg-079'][1],
+                        help='Freiburg 079 scan used for Table 2 / Fig. 4 (default %(default)s)')
     parser.add_argument('--only', nargs='+', default=None,
                         choices=['table2', 'fig4', 'real', 'candidates', 'weights', 'icp'])
 
@@ -158,9 +162,10 @@ def run(args: argparse.Namespace) -> int:
     only = set(args.only or ['table2', 'fig4', 'real', 'candidates', 'weights', 'icp'])
     cfg = MatcherConfig(seed=args.seed)
     logs = {name: read_carmen_log(data / SCANS[name][0]) for name in args.scans}
-    refs = {name: logs[name].points(SCANS[name][1]) for name in args.scans}
+    which = {'intel': args.intel_scan, 'freiburg-079': args.freiburg_scan}
+    refs = {name: logs[name].points(which[name]) for name in args.scans}
     t_start = time.perf_counter()
-    print(f'scans: ' + ', '.join(f'{n} #{SCANS[n][1]} ({len(refs[n])} points)' for n in refs))
+    print('scans: ' + ', '.join(f'{n} #{which[n]} ({len(refs[n])} points)' for n in refs))
     print(f'config: max_points={cfg.max_points} k={cfg.k_candidates} icp={cfg.icp} '
           f'weights={cfg.weights}')
 

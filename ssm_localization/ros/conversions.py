@@ -39,7 +39,7 @@ class ScanArgs:
 
 
 def scan_args_from_msg(msg: LaserScan) -> ScanArgs:
-    """LaserScan -> :class:`ScanArgs` (ranges as float64; no validation, see :func:`scan_problem`)."""
+    """LaserScan -> :class:`ScanArgs` (float64 ranges, unvalidated: see :func:`scan_problem`)."""
     return ScanArgs(np.asarray(msg.ranges, dtype=np.float64), float(msg.angle_min),
                     float(msg.angle_increment), float(msg.range_min), float(msg.range_max))
 

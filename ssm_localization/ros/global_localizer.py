@@ -33,13 +33,15 @@ from visualization_msgs.msg import MarkerArray
 from ssm_localization.ros import markers
 from ssm_localization.ros.conversions import (pose_with_covariance, scan_args_from_msg,
                                               scan_points, scan_problem)
-from ssm_localization.ros.map_indexer import (LASER_PARAMS, LATCHED_QOS, MAP_PARAMS,
+from ssm_localization.ros.map_indexer import (GENERIC, LASER_PARAMS, LATCHED_QOS, MAP_PARAMS,
                                               IndexBuilder, build_config, config_parameter_table,
                                               declare_table, indexer_parameters, laser_pose_of,
                                               map_from_msg, spin)
 
 MODES = ('on_demand', 'continuous')
 MARKER_PERIOD = 1.0   # seconds between marker updates in continuous mode
+EXECUTOR_THREADS = 8
+MAX_WAITING_CALLS = EXECUTOR_THREADS - 3   # relocalize calls blocked on the next scan at once
 DYNAMIC = ('scan_timeout', 'publish_initialpose', 'publish_markers')   # may change at run time
 
 NODE_PARAMS: dict[str, tuple[Any, str]] = {
@@ -73,7 +75,10 @@ def _yaml_value(value: Any) -> str:
         return value if value and value.replace('_', '').isalnum() else repr(value)
     if isinstance(value, (list, tuple)):
         return '[' + ', '.join(_yaml_value(v) for v in value) + ']'
-    return repr(value)
+    text = repr(value)
+    if isinstance(value, float) and 'e' in text and '.' not in text:
+        text = text.replace('e', '.0e')      # 1e-05 is a string to YAML 1.1; 1.0e-05 a float
+    return text
 
 
 def params_yaml() -> str:
@@ -100,8 +105,8 @@ def params_yaml() -> str:
                 common += 1
             for depth in range(common, len(parts) - 1):
                 lines.append('    ' + '  ' * depth + parts[depth] + ':')
-            if len(parts) == 1:
-                lines.append(f'    # {desc}')
+            if not desc.startswith(GENERIC):
+                lines.append('    ' + '  ' * (len(parts) - 1) + f'# {desc}')
             lines.append('    ' + '  ' * (len(parts) - 1) + f'{parts[-1]}: {_yaml_value(default)}')
             prev = parts[:-1]
     return '\n'.join(lines) + '\n'
@@ -140,13 +145,15 @@ class GlobalLocalizerNode(Node):
         self._localizer = None                  # GlobalLocalizer of the current, complete index
         self._map_frame = self.map_frame_param or 'map'
         self._index_markers: list = []
-        self._map_checksum: str | None = None
+        self._map_checksum: str | None = None    # of the last map submitted for indexing
+        self._index_checksum: str | None = None  # of the map the current localizer serves
         self._localize_lock = threading.Lock()  # one localization at a time
         self._scan_cv = threading.Condition()
         self._scan: LaserScan | None = None
         self._scan_seq = 0
         self._stopping = threading.Event()
         self._last_markers = 0.0
+        self._call_slots = threading.BoundedSemaphore(MAX_WAITING_CALLS)
 
         group = ReentrantCallbackGroup()
         self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, 'global_pose',
@@ -193,6 +200,11 @@ class GlobalLocalizerNode(Node):
     def _load_job(self, path: Path):
         from ssm_localization.index import load_index
         index = load_index(path)
+        sensor = tuple(getattr(index.config, 'sensor_pose', self.laser_pose))
+        if any(abs(a - b) > 1e-6 for a, b in zip(sensor, self.laser_pose)):
+            self.get_logger().warning(f'{path} was built with the laser at {sensor} on the base, '
+                                      f'the laser_* parameters say {self.laser_pose}')
+        self.get_logger().info(f'loaded {path}: its own index parameters apply (index.* ignored)')
         return (index, *self._make_localizer(index))
 
     def _build_job(self, occ, progress):
@@ -221,6 +233,7 @@ class GlobalLocalizerNode(Node):
         frame = self.map_frame_param or getattr(index.map, 'frame_id', '') or 'map'
         with self._state_lock:
             self._localizer, self._map_frame, self._index_markers = localizer, frame, marks
+            self._index_checksum = index.map.checksum()
         self.get_logger().info(f'{label}: ready, {len(index.node_xy)} nodes (frame {frame})')
         if self.get_parameter('publish_markers').value:
             self.marker_pub.publish(markers.marker_array(marks, frame,
@@ -237,7 +250,7 @@ class GlobalLocalizerNode(Node):
     def _on_index_error(self, exc: BaseException, label: str) -> None:
         with self._state_lock:
             keeping = self._localizer is not None
-            self._map_checksum = None
+            self._map_checksum = self._index_checksum
         self.get_logger().warning(f'{label}: indexing failed ({type(exc).__name__}: {exc}); '
                                   + ('keeping the previous index' if keeping else
                                      'still no index'))
@@ -259,7 +272,7 @@ class GlobalLocalizerNode(Node):
         return None
 
     def localize_msg(self, msg: LaserScan, verbose: bool = True):
-        """Localize one scan and publish; return ``(Localization | None, failure reason | None)``."""
+        """Localize one scan and publish; return ``(Localization | None, reason | None)``."""
         reason = self._not_ready()
         if reason:
             return None, reason
@@ -306,12 +319,17 @@ class GlobalLocalizerNode(Node):
     def _on_relocalize(self, request: Trigger.Request, response: Trigger.Response):
         reason = self._not_ready()
         timeout = float(self.get_parameter('scan_timeout').value)
-        if reason is None:
-            with self._scan_cv:
-                seq0 = self._scan_seq
-                got = self._scan_cv.wait_for(
-                    lambda: self._scan_seq > seq0 or self._stopping.is_set(), timeout)
-                msg = self._scan
+        if reason is None and not self._call_slots.acquire(blocking=False):
+            reason = f'busy: {MAX_WAITING_CALLS} relocalize calls are already waiting for a scan'
+        elif reason is None:
+            try:    # blocks this executor thread only; scans arrive on the others
+                with self._scan_cv:
+                    seq0 = self._scan_seq
+                    got = self._scan_cv.wait_for(
+                        lambda: self._scan_seq > seq0 or self._stopping.is_set(), timeout)
+                    msg = self._scan
+            finally:
+                self._call_slots.release()
             if not got or msg is None or self._stopping.is_set():
                 reason = (f'no scan received on {self.resolve_topic_name("scan")} within '
                           f'{timeout:g} s')
@@ -355,7 +373,7 @@ class GlobalLocalizerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return spin(GlobalLocalizerNode, args)
+    return spin(GlobalLocalizerNode, args, num_threads=EXECUTOR_THREADS)
 
 
 if __name__ == '__main__':

@@ -46,8 +46,17 @@ DESCRIPTIONS: dict[str, str] = {
     'localizer.prefilter': 'nodes kept by descriptor voting before spectral ranking; 0 = all',
     'localizer.paper_mode': 'plain paper pipeline: no prefilter, refinement or map check',
     'localizer.min_score': 'map-agreement score below which a hypothesis is rejected',
-    'localizer.ambiguity_margin': 'a distinct rival within this score of the best: ambiguous',
+    'index.matcher.ransac_iterations': 'RANSAC iterations of the fine pose (paper II.C)',
+    'index.matcher.ransac_threshold': 'RANSAC inlier distance, metres',
+    'index.matcher.ransac_min_span': 'RANSAC: minimum spread of a 2-pair sample, metres',
+    'index.matcher.min_inliers': 'fewer RANSAC inliers than this: no match',
+    'index.matcher.seed': 'random seed of RANSAC (results are reproducible)',
+    'index.matcher.icp': 'refine each match by point-to-line ICP (beyond the paper)',
+    'index.matcher.weights': 'logistic weights of the pairwise affinity (eq. 4)',
+    'index.matcher.desc_radius': 'radius of the local shape descriptors, metres',
 }
+
+GENERIC = 'see '   # prefix of the description of a config field documented nowhere else
 
 # Config fields that the node maps from its own parameters instead (laser_x/laser_y/laser_yaw).
 SENSOR_POSE_FIELDS = ('laser_pose', 'sensor_pose')
@@ -91,11 +100,44 @@ def config_parameters(prefix: str, config: Any) -> dict[str, Any]:
     return out
 
 
+def field_descriptions(cls: type) -> dict[str, str]:
+    """Field descriptions of a config dataclass, from its source: a trailing ``# comment`` on the
+    field line, or a ````name````: text`` entry in the class docstring."""
+    import inspect
+    import re
+    out: dict[str, str] = {}
+    try:
+        source = inspect.getsource(cls)
+    except (OSError, TypeError):
+        return out
+    doc = ' '.join((cls.__doc__ or '').split())
+    for names, text in re.findall(r'((?:``\w+``(?:,\s*|\s+and\s+)?)+):\s*([^`]+)', doc):
+        for name in re.findall(r'``(\w+)``', names):
+            out[name] = text.strip().rstrip(';,')
+    for name, text in re.findall(r'^\s+(\w+)\s*:[^#\n]*=[^#\n]*#\s*(.+)$', source, re.M):
+        out[name] = text.strip()
+    return out
+
+
+def _described(prefix: str, config: Any) -> dict[str, str]:
+    """``{dotted name: description}`` for every leaf field of a config tree."""
+    out: dict[str, str] = {}
+    notes = field_descriptions(type(config))
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        name = f'{prefix}.{f.name}'
+        if dataclasses.is_dataclass(value):
+            out.update(_described(name, value))
+        else:
+            out[name] = notes.get(f.name, '')
+    return out
+
+
 def config_parameter_table(prefix: str, config: Any) -> dict[str, tuple[Any, str]]:
     """``{dotted name: (default, description)}`` of a config dataclass (ROS-typable fields)."""
-    return {name: (default, DESCRIPTIONS.get(name) or
-                   f'{type(config).__name__} field {name.split(".", 1)[1]} '
-                   '(see ssm_localization docs)')
+    notes = _described(prefix, config)
+    return {name: (default, DESCRIPTIONS.get(name) or notes.get(name) or
+                   f'{GENERIC}{type(config).__name__}.{name.split(".", 1)[1]}')
             for name, default in config_parameters(prefix, config).items()}
 
 

@@ -123,6 +123,7 @@ class BagPlayer(Node):
         gaps = np.diff(np.unique(stamps))
         loop_gap = float(np.median(gaps)) if gaps.size else 0.1
         span = float(stamps[-1] - stamps[0])
+        passes = 0
         while ok():
             t_bag0, t_wall0 = self.items[0].stamp, time.monotonic()
             for it in self.items:
@@ -135,7 +136,10 @@ class BagPlayer(Node):
                     return sent
                 self.pubs[it.topic].publish(it.msg)
                 sent += 1
-            log(f'played {len(self.items)} messages ({span:.1f} s of bag time)')
+            passes += 1
+            if passes == 1:
+                log(f'played {len(self.items)} messages ({span:.1f} s of bag time)'
+                    + ('; looping' if loop else ''))
             if not loop:
                 break
             time.sleep(loop_gap / rate if rate > 0 else 0.0)
