@@ -7,7 +7,7 @@ OUT    := out
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: venv demo test test-fast bench bench-scanmatch bench-index bench-localize colcon-check clean
+.PHONY: venv demo test test-fast params-yaml bench bench-scanmatch bench-index bench-localize colcon-check clean
 
 $(STAMP): requirements.txt setup.py setup.cfg
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 10), "Python 3.10+ required"'
@@ -46,6 +46,9 @@ colcon-check: $(STAMP)
 		--paths . --packages-select ssm_localization
 	test -x install/colcon/ssm_localization/lib/ssm_localization/global_localizer
 	test -f install/colcon/ssm_localization/share/ament_index/resource_index/packages/ssm_localization
+
+params-yaml: $(STAMP)
+	$(BIN)/python -c "from ssm_localization.ros.global_localizer import params_yaml; print(params_yaml(), end='')" > config/ssm_localization.yaml
 
 clean:
 	rm -rf $(VENV) build install log $(OUT) *.egg-info

@@ -95,10 +95,14 @@ class OccupancyMap:
         return (r >= 0) & (r < self.height) & (c >= 0) & (c < self.width)
 
     def checksum(self) -> str:
-        """sha256 (hex) of the cells and the geometry (shape, resolution, origin)."""
+        """sha256 (hex) of the cells and the geometry (shape, resolution, origin).
+
+        Geometry is hashed at float32 precision, as nav_msgs/OccupancyGrid carries it, so a map
+        read from a YAML file and the same map received over the wire have the same checksum.
+        """
         h = hashlib.sha256()
         h.update(np.asarray(self.data.shape, dtype='<i8').tobytes())
-        h.update(np.asarray((self.resolution, *self.origin), dtype='<f8').tobytes())
+        h.update(np.asarray((self.resolution, *self.origin), dtype='<f4').tobytes())
         h.update(self.data.tobytes())
         return h.hexdigest()
 

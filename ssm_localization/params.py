@@ -140,6 +140,12 @@ def load_configs(path: str | Path | None, node: str = 'global_localizer'):
     try:
         index_cfg = from_dict(IndexConfig, section.get('index'), 'index.')
         loc_cfg = from_dict(LocalizerConfig, section.get('localizer'), 'localizer.')
-    except ValueError as exc:
+        laser = [section.get(k) for k in ('laser_x', 'laser_y', 'laser_yaw')]
+        if any(v is not None for v in laser):
+            # the laser pose on the base (ROS parameters laser_x/y/yaw) feeds both configs
+            pose = tuple(float(v or 0.0) for v in laser)
+            index_cfg = dataclasses.replace(index_cfg, sensor_pose=pose)
+            loc_cfg = dataclasses.replace(loc_cfg, laser_pose=pose)
+    except (TypeError, ValueError) as exc:
         raise ValueError(f'{path}: {exc}') from None
     return index_cfg, loc_cfg
