@@ -14,6 +14,7 @@ the plain method of the paper (the benchmark compares both).
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -23,8 +24,8 @@ from scipy.spatial import cKDTree
 from .descriptors import descriptor_distances
 from .index import MapIndex
 from .matcher import match_features, spectral_score
-from .raycast import cast_rays
-from .refine import BeamCheck, SurfaceModel, check_beams, refine_pose
+from .raycast import RayCaster
+from .refine import BeamCheck, SurfaceModel, check_beams, refine_poses
 from .scan import prepare_scan, ranges_to_points
 from .transforms import Pose2, apply, compose, inverse, wrap_angle
 
@@ -35,12 +36,14 @@ STATUSES = ('ok', 'ambiguous', 'failed')
 class LocalizerConfig:
     """Parameters of the localizer (the matcher's own come from the index it was built with)."""
 
-    top_n: int = 5                    # candidates kept by the coarse stage (paper: N = 5)
-    prefilter: int = 16               # nodes kept by descriptor voting before spectral ranking; 0 = all
+    top_n: int = 10                   # candidates kept by the coarse stage (paper: N = 5)
+    prefilter: int = 20               # nodes kept by descriptor voting before spectral ranking; 0 = all
     vote_neighbours: int = 8          # nodes each query descriptor votes for (its nearest ones)
     sigma_d: float = 0.05             # eq. (10), metres
     laser_pose: Pose2 = (0.0, 0.0, 0.0)   # the laser's pose on the robot base (x, y, yaw)
     paper_mode: bool = False          # plain paper pipeline: no prefilter, refinement or checks
+    fine_icp: bool = True             # matcher ICP in the fine stage (better hypotheses on real scans)
+    fine_retries: int = 0             # matcher retries on further spectral clusters per candidate
     refine: bool = True               # Gauss-Newton on the map's wall surface
     surface_depth: float = 0.5        # cells behind the occupied-cell boundary where walls are
     refine_iterations: int = 12
@@ -48,7 +51,9 @@ class LocalizerConfig:
     beam_tolerance: float = 0.15      # metres (+2 % of the range) for a beam to agree with the map
     min_consistent: float = 0.5       # fewer beams agreeing with the map rejects a hypothesis
     max_contradicting: float = 0.3    # more beams seeing through walls rejects it
-    ambiguity_ratio: float = 1.5      # a distinct rival whose fit cost is within this factor: ambiguous
+    contradiction_weight: float = 2.0  # fit = cost / inlier_distance^2 + this * through-wall fraction
+    ambiguity_ratio: float = 1.5      # a distinct rival whose fit is within this factor: ambiguous
+    inlier_distance: float = 0.1      # endpoints further from the walls count as outliers (m)
     distinct_xy: float = 0.5          # poses further apart than this are distinct (m) ...
     distinct_yaw: float = np.deg2rad(10.0)  # ... or than this (rad)
     min_points: int = 10              # fewer valid beams than this: failed
@@ -73,6 +78,7 @@ class Hypothesis:
     covariance: np.ndarray | None = None
     check: BeamCheck | None = None
     cost: float = float('inf')              # mean truncated squared surface residual (m^2)
+    fit: float = float('inf')               # cost normalized, plus the through-wall penalty
     n_pairs: int = 0
 
     @property
@@ -137,6 +143,10 @@ class GlobalLocalizer:
         self.index = index
         self.config = config or LocalizerConfig()
         self.matcher_config = index.config.matcher
+        # the fine stage only needs a pose good enough for the map refinement to converge
+        self.fine_config = dataclasses.replace(
+            self.matcher_config, icp=self.config.fine_icp, polish=self.config.fine_icp,
+            retries=self.config.fine_retries)
         if len(index.features) == 0:
             raise ValueError('the map index has no nodes: nothing to localize against')
         self._node_trees = [cKDTree(f.points) if len(f.points) else None for f in index.features]
@@ -147,7 +157,8 @@ class GlobalLocalizer:
         self._desc_starts = np.minimum(np.concatenate(([0], np.cumsum(self._desc_count)[:-1])),
                                        max(len(self._desc_stack) - 1, 0))
         m = index.map
-        self._occupied = m.occupied_mask()
+        self._occupied = m.occupied_mask(index.config.occupied_thresh)
+        self._caster = RayCaster(self._occupied, m.resolution, m.origin)
         self._surface = SurfaceModel.from_occupancy(self._occupied, m.resolution, m.origin,
                                                     self.config.surface_depth)
 
@@ -211,7 +222,7 @@ class GlobalLocalizer:
         out = []
         for h in hyps:
             feats = self.index.features[h.node]
-            m = match_features(feats, query, self.matcher_config)
+            m = match_features(feats, query, self.fine_config)
             if not m.ok:
                 continue
             h.n_pairs = len(m.pairs)
@@ -223,30 +234,38 @@ class GlobalLocalizer:
         return out
 
     def _refine_unique(self, hyps: list[Hypothesis], points: np.ndarray) -> list[Hypothesis]:
-        """Refine each distinct pose once on the wall surface; sort by fit cost."""
+        """Refine each distinct pose once on the wall surface (batched); drop duplicates."""
         cfg = self.config
-        out: list[Hypothesis] = []
+        todo: list[Hypothesis] = []
         for h in sorted(hyps, key=lambda h: -h.spectral):
-            if any(_same(h.laser_pose, o.laser_pose) for o in out):
-                continue
-            r = refine_pose(self._surface, points, h.laser_pose,
-                            iterations=cfg.refine_iterations if cfg.refine else 0)
+            if not any(_same(h.laser_pose, o.laser_pose) for o in todo):
+                todo.append(h)
+        if not todo:
+            return []
+        results = refine_poses(self._surface, points, np.array([h.laser_pose for h in todo]),
+                               iterations=cfg.refine_iterations if cfg.refine else 0,
+                               inlier_distance=cfg.inlier_distance)
+        out: list[Hypothesis] = []
+        for h, r in zip(todo, results):
             h.laser_pose, h.cost = r.pose, r.cost
             h.covariance = self._base_covariance(r.covariance, h.laser_pose)
             h.pose = compose(h.laser_pose, inverse(cfg.laser_pose))
             if not any(_same(h.laser_pose, o.laser_pose) for o in out):
                 out.append(h)
-        out.sort(key=lambda h: h.cost)
         return out
 
-    def beam_check(self, h: Hypothesis, angles: np.ndarray, beams: np.ndarray) -> None:
-        """Ray-cast the query's beams from ``h`` and compare them with the measured ranges."""
+    def beam_check(self, hyps: list[Hypothesis], angles: np.ndarray, beams: np.ndarray) -> None:
+        """Ray-cast the query's beams from every hypothesis at once; compare with the scan."""
+        if not hyps:
+            return
         cfg = self.config
-        m = self.index.map
-        expected = cast_rays(self._occupied, m.resolution, m.origin, np.array([h.laser_pose]),
-                             angles, cfg.max_cast_range)[0]
-        h.check = check_beams(np.where(beams > cfg.max_cast_range, np.inf, beams), expected,
-                              tol=cfg.beam_tolerance)
+        expected = self._caster.cast(np.array([h.laser_pose for h in hyps]), angles,
+                                     cfg.max_cast_range)
+        measured = np.where(beams > cfg.max_cast_range, np.inf, beams)
+        for h, e in zip(hyps, expected):
+            h.check = check_beams(measured, e, tol=cfg.beam_tolerance)
+            h.fit = (h.cost / cfg.inlier_distance ** 2
+                     + cfg.contradiction_weight * h.check.contradicting)
 
     @staticmethod
     def _position_std(h: Hypothesis) -> float:
@@ -281,12 +300,9 @@ class GlobalLocalizer:
                                 candidates=hyps, latency_ms=(time.perf_counter() - t0) * 1e3,
                                 message='paper mode: largest vicinity score')
         hyps = self._refine_unique(hyps, points)
-        best = None
-        for h in hyps:                      # cheapest fit first; ray-cast only until one passes
-            self.beam_check(h, angles, beams)
-            if h.plausible(cfg):
-                best = h
-                break
+        self.beam_check(hyps, angles, beams)
+        hyps.sort(key=lambda h: (not h.plausible(cfg), h.fit))
+        best = hyps[0] if hyps[0].plausible(cfg) else None
         ms = (time.perf_counter() - t0) * 1e3
         if best is None:
             worst = hyps[0]
@@ -295,13 +311,8 @@ class GlobalLocalizer:
                                 message=(f'no hypothesis agrees with the map (best fit: agree '
                                          f'{worst.check.consistent:.0%}, through walls '
                                          f'{worst.check.contradicting:.0%})'))
-        for h in hyps:
-            if h is not best and h.check is None and h.cost <= best.cost * cfg.ambiguity_ratio \
-                    and _distinct(h.pose, best.pose, cfg):
-                self.beam_check(h, angles, beams)
-        ms = (time.perf_counter() - t0) * 1e3
         rivals = [h for h in hyps if h is not best and h.plausible(cfg) and _distinct(h.pose, best.pose, cfg)
-                  and h.cost <= best.cost * cfg.ambiguity_ratio]
+                  and h.fit <= best.fit * cfg.ambiguity_ratio]
         cov = best.covariance
         if rivals:
             status = 'ambiguous'
@@ -315,6 +326,6 @@ class GlobalLocalizer:
         else:
             status = 'ok'
             msg = (f'agree {best.check.consistent:.0%}, through walls '
-                   f'{best.check.contradicting:.0%}, rms {np.sqrt(best.cost) * 1e3:.0f} mm')
+                   f'{best.check.contradicting:.0%}, fit {best.fit:.3f}')
         return Localization(status=status, pose=best.pose, covariance=cov, node=best.node,
                             score=best.score, candidates=hyps, latency_ms=ms, message=msg)

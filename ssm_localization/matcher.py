@@ -2,7 +2,15 @@
 
 Pipeline: ``prepare_scan`` (downsample, tangents eq. 1, descriptors) -> tentative correspondences
 L (descriptor top-k) -> affinity G (eqs. 2-4) -> leading eigenvector + greedy binarization
-(eqs. 5-6) -> 2-point RANSAC + least squares (eqs. 7-8) -> optional point-to-line ICP.
+(eqs. 5-6) -> 2-point RANSAC + least squares (eqs. 7-8). Beyond the paper (config flags): a
+point-to-line ICP + mutual-nearest-neighbour least-squares polish on the denser point sets, and,
+when the pose explains too little of the new scan, further RANSAC hypotheses / spectral clusters
+ranked by overlap.
+
+Config fields read by ``prepare_scan`` (so stored ScanFeatures, e.g. in a map index, must be
+rebuilt when they change): max_points, min_spacing, context_spacing, tangent_method,
+tangent_radius, gap, desc_radius, length_cap, desc_radial_bins, desc_angular_bins,
+icp_max_points, icp_min_spacing, normal_radius. See ``PREPARE_FIELDS``.
 """
 from __future__ import annotations
 
@@ -13,15 +21,18 @@ import numpy as np
 
 from .descriptors import candidates
 from .pairwise import affinity_matrix
-from .ransac import icp_point_to_line, mutual_nn_procrustes, ransac_pose
+from .ransac import icp_point_to_line, mutual_nn_procrustes, ransac_hypotheses
 from .scan import ScanFeatures, as_points, prepare_scan
 from .spectral import binarize, leading_eigenvector, matching_score
 
 __all__ = ['MatcherConfig', 'MatchResult', 'ScanFeatures', 'prepare_scan', 'match_scans',
            'match_features', 'spectral_score']
 
+PREPARE_FIELDS = ('max_points', 'min_spacing', 'context_spacing', 'tangent_method',
+                  'tangent_radius', 'gap', 'desc_radius', 'length_cap', 'desc_radial_bins',
+                  'desc_angular_bins', 'icp_max_points', 'icp_min_spacing', 'normal_radius')
 #: logistic weights w of eq. 4 learned by ``scripts/learn_weights.py`` (see its docstring)
-LEARNED_WEIGHTS = (3.0, -200.0, -12.5)
+LEARNED_WEIGHTS = (1.04795, -129.019, -0.0759161)
 #: hand-set weights: sigma_d = 50 mm, sigma_theta = 0.2 rad, w0 = 3
 HAND_WEIGHTS = (3.0, -200.0, -12.5)
 
@@ -31,7 +42,7 @@ class MatcherConfig:
     """Scan matcher settings (lengths in metres, angles in radians); defaults are tuned."""
 
     # preprocessing (scan.py)
-    max_points: int = 120            # point budget after spatially even downsampling
+    max_points: int = 100            # point budget after spatially even downsampling
     min_spacing: float = 0.05        # smallest voxel side of the downsampling
     context_spacing: float = 0.1     # voxel side of the context set (tangents, descriptors)
     tangent_method: str = 'pca'      # 'pca' (robust, default) or 'eq1' (paper eq. 1 verbatim)
@@ -57,11 +68,12 @@ class MatcherConfig:
     ransac_threshold: float = 0.15
     ransac_min_span: float = 0.3
     ransac_weighted: bool = False    # draw / count pairs weighted by x* (beyond the paper)
+    ransac_hypotheses: int = 3       # distinct hypotheses refined when overlap is low
     seed: int = 0
     min_inliers: int = 6
     # point-to-line ICP refinement (beyond the paper)
     icp: bool = True
-    icp_iterations: int = 15
+    icp_iterations: int = 10
     icp_max_dist: float = 0.3
     icp_min_dist: float = 0.05
     icp_max_points: int = 400        # budget of the denser point set used by ICP
@@ -69,9 +81,9 @@ class MatcherConfig:
     normal_radius: float = 0.25      # PCA neighbourhood of the ICP normals
     polish: bool = True              # after ICP: point-to-point LS on mutual nearest neighbours
     polish_gate: float = 0.05
-    polish_iterations: int = 2
+    polish_iterations: int = 1
     # retries on the next spectral cluster when the pose explains too little (beyond the paper)
-    retries: int = 2
+    retries: int = 1
     retry_overlap: float = 0.6       # fraction of new ICP points within overlap_dist
     overlap_dist: float = 0.1
 
@@ -140,7 +152,8 @@ def spectral_score(ref: ScanFeatures, new: ScanFeatures,
 
 
 def overlap(ref: ScanFeatures, new: ScanFeatures, pose, dist: float) -> float:
-    """Fraction of the new scan's ICP points within ``dist`` of a reference ICP point at ``pose``."""
+    """Fraction of the new scan's ICP points within ``dist`` of a reference ICP point at
+    ``pose``."""
     if len(new.fine_points) == 0 or len(ref.fine_points) == 0:
         return 0.0
     c, s = math.cos(pose[2]), math.sin(pose[2])
@@ -149,38 +162,54 @@ def overlap(ref: ScanFeatures, new: ScanFeatures, pose, dist: float) -> float:
     return float(np.mean(d < dist))
 
 
+def _refine(ref: ScanFeatures, new: ScanFeatures, pose, config: MatcherConfig):
+    """ICP + polish from ``pose``; returns ``(pose, rms, overlap)``, never losing overlap."""
+    ov0 = overlap(ref, new, pose, config.overlap_dist)
+    if not config.icp:
+        return pose, math.nan, ov0
+    p, _, rms = icp_point_to_line(ref.fine_points, ref.fine_normals, new.fine_points, pose,
+                                  config.icp_iterations, config.icp_max_dist,
+                                  config.icp_min_dist, ref_weights=ref.fine_weights,
+                                  tree=ref.fine_tree)
+    if config.polish:
+        p, _ = mutual_nn_procrustes(ref.fine_points, new.fine_points, p, config.polish_gate,
+                                    config.polish_iterations, ref.fine_tree, new.fine_tree)
+    ov = overlap(ref, new, p, config.overlap_dist)
+    if ov < ov0 - 0.05:          # safety net: the refinement slid away (corridors)
+        return pose, math.nan, ov0
+    return p, rms, ov
+
+
 def _estimate(ref: ScanFeatures, new: ScanFeatures, q: np.ndarray, xq: np.ndarray,
               config: MatcherConfig):
-    """RANSAC (II.C) on the consistent pairs ``q`` (eigenvector values ``xq``) then ICP;
-    ``(pose, inlier mask, rms)`` or None."""
+    """RANSAC (II.C) on the consistent pairs ``q`` (eigenvector values ``xq``), then ICP.
+
+    If the best hypothesis explains less than ``retry_overlap`` of the new scan, the next
+    distinct hypotheses (up to ``ransac_hypotheses``) are refined too and the one with the
+    largest overlap wins. Returns ``(pose, inlier mask, rms, overlap)`` or None.
+    """
     rp = ref.points[q[:, 0]]
     npts = new.points[q[:, 1]]
     rng = np.random.default_rng(config.seed)
-    pose, mask = ransac_pose(rp, npts, config.ransac_threshold, config.ransac_iterations, rng,
-                             config.ransac_min_span, xq if config.ransac_weighted else None)
-    if pose is None:
+    hyps = ransac_hypotheses(rp, npts, config.ransac_threshold, config.ransac_iterations, rng,
+                             config.ransac_min_span, xq if config.ransac_weighted else None,
+                             max(config.ransac_hypotheses, 1))
+    best = None
+    for pose0, mask in hyps:
+        pose, rms, ov = _refine(ref, new, pose0, config)
+        if best is None or ov > best[3]:
+            best = (pose, mask, rms, ov)
+        if ov >= config.retry_overlap:
+            break
+    if best is None:
         return None
-    rms = math.nan
-    if config.icp:
-        before = pose
-        pose, _, rms = icp_point_to_line(ref.fine_points, ref.fine_normals, new.fine_points,
-                                         pose, config.icp_iterations, config.icp_max_dist,
-                                         config.icp_min_dist, ref_weights=ref.fine_weights,
-                                         tree=ref.fine_tree)
-        if config.polish:
-            pose, _ = mutual_nn_procrustes(ref.fine_points, new.fine_points, pose,
-                                           config.polish_gate, config.polish_iterations,
-                                           ref.fine_tree, new.fine_tree)
-        # safety net: never let the refinement lose overlap gained by RANSAC
-        if overlap(ref, new, pose, config.overlap_dist) < \
-                overlap(ref, new, before, config.overlap_dist) - 0.05:
-            pose = before
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        moved = npts @ np.array([[c, s], [-s, c]]) + np.array(pose[:2])
-        mask2 = np.linalg.norm(rp - moved, axis=1) < config.ransac_threshold
-        if mask2.sum() >= mask.sum() // 2:
-            mask = mask2
-    return pose, mask, rms
+    pose, mask, rms, ov = best
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    moved = npts @ np.array([[c, s], [-s, c]]) + np.array(pose[:2])
+    mask2 = np.linalg.norm(rp - moved, axis=1) < config.ransac_threshold
+    if mask2.sum() >= mask.sum() // 2:
+        mask = mask2
+    return pose, mask, rms, ov
 
 
 def match_features(ref: ScanFeatures, new: ScanFeatures,
@@ -217,9 +246,8 @@ def match_features(ref: ScanFeatures, new: ScanFeatures,
         est = _estimate(ref, new, q, x[sel], config)
         if est is None:
             break
-        pose, mask, rms = est
+        pose, mask, rms, ov = est
         last = q[mask]
-        ov = overlap(ref, new, pose, config.overlap_dist)
         if best is None or ov > best[4]:
             best = (pose, q, mask, rms, ov)
         if ov >= config.retry_overlap:

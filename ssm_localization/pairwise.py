@@ -6,9 +6,13 @@ import numpy as np
 
 def distance_table(points: np.ndarray) -> np.ndarray:
     """``d_ij = ||p_i - p_j||`` (eq. 2), (N, N) float32."""
-    p = np.asarray(points, dtype=float)
-    d = p[:, None, :] - p[None, :, :]
-    return np.hypot(d[..., 0], d[..., 1]).astype(np.float32)
+    p = np.asarray(points, dtype=np.float32)
+    dx = p[:, None, 0] - p[None, :, 0]
+    dy = p[:, None, 1] - p[None, :, 1]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return np.sqrt(dx, out=dx)
 
 
 def angle_table(tangents: np.ndarray) -> np.ndarray:
@@ -18,7 +22,7 @@ def angle_table(tangents: np.ndarray) -> np.ndarray:
 
 
 def deformation(d_ref, a_ref, d_new, a_new) -> np.ndarray:
-    """``g_ij(i', j') = [1, (d_ij - d_i'j')^2, (theta_ij - theta_i'j')^2]`` (eq. 3), shape (..., 3)."""
+    """``g_ij(i', j') = [1, (d_ij - d_i'j')^2, (theta_ij - theta_i'j')^2]`` (eq. 3), (..., 3)."""
     dd = np.asarray(d_ref, float) - np.asarray(d_new, float)
     da = np.asarray(a_ref, float) - np.asarray(a_new, float)
     return np.stack((np.ones_like(dd), dd * dd, da * da), axis=-1)

@@ -45,23 +45,24 @@ def procrustes(ref: np.ndarray, new: np.ndarray, weights: np.ndarray | None = No
     return (float(cr[0] - c * cn[0] + s * cn[1]), float(cr[1] - s * cn[0] - c * cn[1]), th)
 
 
-def ransac_pose(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: int,
-                rng: np.random.Generator, min_span: float = 0.2,
-                weights: np.ndarray | None = None):
+def ransac_hypotheses(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: int,
+                      rng: np.random.Generator, min_span: float = 0.2,
+                      weights: np.ndarray | None = None, n_best: int = 1,
+                      distinct: tuple[float, float] = (0.3, 0.1)) -> list:
     """2-point RANSAC over correspondences ``ref[k] <-> new[k]`` (II.C steps 1-4).
 
     All ``iterations`` hypotheses are drawn and scored at once (eqs. 7-8); pairs closer than
-    ``min_span`` or whose lengths differ by more than ``2 * threshold`` are skipped. The best
-    hypothesis (most supports, then least residual) is refined by least squares on its inliers,
-    twice (re-collecting inliers). With ``weights`` (e.g. the eigenvector x* of eq. 6, beyond
-    the paper) pairs are drawn with probability proportional to their weight and the support of
-    a hypothesis is the summed weight of its inliers instead of their count.
-    Returns ``(pose, inlier_mask)`` or ``(None, empty mask)``.
+    ``min_span`` or whose lengths differ by more than ``2 * threshold`` are skipped. Hypotheses
+    are ranked by support (then least residual); the ``n_best`` best mutually distinct ones
+    (farther apart than ``distinct`` = (metres, radians)) are each refined by least squares on
+    their inliers, twice (re-collecting inliers). With ``weights`` (e.g. the eigenvector x* of
+    eq. 6, beyond the paper) pairs are drawn with probability proportional to their weight and
+    the support is the summed weight of the inliers instead of their count.
+    Returns a list of ``(pose, inlier_mask)``, best first (empty if nothing fits).
     """
     k = len(ref)
-    none = (None, np.zeros(k, dtype=bool))
     if k < 2:
-        return none
+        return []
     if weights is None:
         a = rng.integers(0, k, iterations)
         b = rng.integers(0, k - 1, iterations)
@@ -80,7 +81,7 @@ def ransac_pose(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: 
     ln = np.linalg.norm(new[a] - new[b], axis=1)
     good = (lr > min_span) & (np.abs(lr - ln) < 2.0 * threshold)
     if not good.any():
-        return none
+        return []
     a, b = a[good], b[good]
     poses = two_point_poses(ref[a], new[a], ref[b], new[b])
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
@@ -90,19 +91,38 @@ def ransac_pose(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: 
     inl = r2 < threshold * threshold
     support = inl @ wv
     cost = np.where(inl, r2, threshold * threshold).sum(axis=1)
-    best = int(np.lexsort((cost, -support))[0])
-    mask = inl[best]
-    if mask.sum() < 2:
-        return none
-    pose = tuple(float(v) for v in poses[best])
-    for _ in range(2):
-        pose = procrustes(ref[mask], new[mask])
-        res = np.linalg.norm(ref - _apply(pose, new), axis=1)
-        m2 = res < threshold
-        if m2.sum() < 2:
+    out: list = []
+    chosen: list = []
+    for h in np.lexsort((cost, -support)).tolist():
+        if len(out) >= n_best:
             break
-        mask = m2
-    return pose, mask
+        mask = inl[h]
+        if mask.sum() < 2:
+            break
+        raw = poses[h]
+        if any(math.hypot(raw[0] - o[0], raw[1] - o[1]) < distinct[0] and
+               abs(math.remainder(raw[2] - o[2], 2 * math.pi)) < distinct[1] for o in chosen):
+            continue
+        chosen.append(raw)
+        pose = tuple(float(v) for v in raw)
+        for _ in range(2):
+            pose = procrustes(ref[mask], new[mask])
+            res = np.linalg.norm(ref - _apply(pose, new), axis=1)
+            m2 = res < threshold
+            if m2.sum() < 2:
+                break
+            mask = m2
+        out.append((pose, mask))
+    return out
+
+
+def ransac_pose(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: int,
+                rng: np.random.Generator, min_span: float = 0.2,
+                weights: np.ndarray | None = None):
+    """The best hypothesis of :func:`ransac_hypotheses`: ``(pose, inlier_mask)`` or
+    ``(None, empty mask)``."""
+    hyps = ransac_hypotheses(ref, new, threshold, iterations, rng, min_span, weights, 1)
+    return hyps[0] if hyps else (None, np.zeros(len(ref), dtype=bool))
 
 
 def _apply(pose, pts: np.ndarray) -> np.ndarray:

@@ -105,55 +105,80 @@ class RefineResult:
     iterations: int
 
 
-def refine_pose(surface: SurfaceModel, points: np.ndarray, pose: Pose2, *,
-                iterations: int = 12, huber: float = 0.03, truncate: tuple[float, float] = (0.3, 0.1),
-                inlier_distance: float = 0.1, min_sigma: float = 0.005) -> RefineResult:
-    """Gauss-Newton on ``sum rho(sdf(R p + t))`` over the laser pose (robust, truncated).
+def refine_pose(surface: SurfaceModel, points: np.ndarray, pose: Pose2, **kwargs) -> RefineResult:
+    """Refine one laser pose on the wall surface (see :func:`refine_poses`)."""
+    return refine_poses(surface, points, np.array([pose], float), **kwargs)[0]
+
+
+def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *,
+                 iterations: int = 12, huber: float = 0.03,
+                 truncate: tuple[float, float] = (0.3, 0.1), inlier_distance: float = 0.1,
+                 min_sigma: float = 0.005) -> list[RefineResult]:
+    """Gauss-Newton on ``sum rho(sdf(R p + t))`` for several laser poses at once (batched).
 
     The truncation radius shrinks from ``truncate[0]`` to ``truncate[1]`` so clutter and unmapped
     objects drop out; Huber weights soften the rest. The covariance is ``sigma^2 (J^T W J)^-1``.
+    All hypotheses share one signed-distance look-up per iteration, which is what makes refining
+    every candidate of the fine stage affordable.
     """
-    pts = np.asarray(points, float)
-    x = np.array(pose, float)
-    jtj = np.eye(3)
-    sigma2 = min_sigma ** 2
+    pts = np.asarray(points, float).reshape(-1, 2)
+    x = np.array(poses, float).reshape(-1, 3)
+    n_h, n_p = len(x), len(pts)
+    jtj = np.tile(np.eye(3), (n_h, 1, 1))
+    sigma2 = np.full(n_h, min_sigma ** 2)
+    active = np.ones(n_h, dtype=bool)
     it = 0
     for it in range(1, iterations + 1):
+        if n_p < 3 or not active.any():
+            break
         trunc = truncate[0] + (truncate[1] - truncate[0]) * min(1.0, (it - 1) / max(iterations // 2, 1))
-        rot = rotation(x[2])
-        world = pts @ rot.T + x[:2]
-        r, g, valid = surface.signed_distance(world)
+        world, rel = _transform(x, pts)
+        r, g, valid = surface.signed_distance(world.reshape(-1, 2))
+        r, g, valid = r.reshape(n_h, n_p), g.reshape(n_h, n_p, 2), valid.reshape(n_h, n_p)
         use = valid & (np.abs(r) < trunc)
-        if use.sum() < 3:
-            break
-        rel = world[use] - x[:2]
-        jac = np.column_stack((g[use], g[use, 0] * -rel[:, 1] + g[use, 1] * rel[:, 0]))
-        ru = r[use]
-        absr = np.abs(ru)
-        wts = np.where(absr <= huber, 1.0, huber / np.maximum(absr, 1e-12))
-        jtj = (jac * wts[:, None]).T @ jac
-        jtr = (jac * wts[:, None]).T @ ru
-        try:
-            step = -np.linalg.solve(jtj + 1e-9 * np.eye(3), jtr)
-        except np.linalg.LinAlgError:
-            break
+        absr = np.abs(r)
+        wts = np.where(use, np.where(absr <= huber, 1.0, huber / np.maximum(absr, 1e-12)), 0.0)
+        jac = np.concatenate((g, (g[..., 1] * rel[..., 0] - g[..., 0] * rel[..., 1])[..., None]),
+                             axis=2)
+        a = np.einsum('hn,hni,hnj->hij', wts, jac, jac)
+        b = np.einsum('hn,hni,hn->hi', wts, jac, r)
+        enough = use.sum(axis=1) >= 3
+        step = np.zeros((n_h, 3))
+        ok = active & enough
+        if ok.any():
+            step[ok] = -np.linalg.solve(a[ok] + 1e-9 * np.eye(3), b[ok][..., None])[..., 0]
+            jtj[ok] = a[ok]
+            sigma2[ok] = np.maximum(np.sum(wts[ok] * r[ok] ** 2, axis=1)
+                                    / np.maximum(use[ok].sum(axis=1) - 3, 1), min_sigma ** 2)
         x += step
-        x[2] = wrap_angle(x[2])
-        sigma2 = max(float(np.sum(wts * ru ** 2) / max(use.sum() - 3, 1)), min_sigma ** 2)
-        if np.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
-            break
-    rot = rotation(x[2])
-    r, _, valid = surface.signed_distance(pts @ rot.T + x[:2])
+        x[:, 2] = wrap_angle(x[:, 2])
+        active &= enough & ((np.hypot(step[:, 0], step[:, 1]) >= 1e-5) | (np.abs(step[:, 2]) >= 1e-6))
+    world, _ = _transform(x, pts)
+    r, _, valid = surface.signed_distance(world.reshape(-1, 2))
+    r, valid = r.reshape(n_h, n_p), valid.reshape(n_h, n_p)
     inl = valid & (np.abs(r) < inlier_distance)
-    try:
-        cov = sigma2 * np.linalg.inv(jtj)
-    except np.linalg.LinAlgError:
-        cov = np.diag([1e3, 1e3, 1e3])
-    rms = float(np.sqrt(np.mean(r[inl] ** 2))) if inl.any() else float('inf')
-    cost = float(np.mean(np.where(inl, r ** 2, inlier_distance ** 2))) if len(pts) else float('inf')
-    return RefineResult(pose=(float(x[0]), float(x[1]), float(x[2])), covariance=cov, rms=rms,
-                        inlier_fraction=float(inl.mean()) if len(pts) else 0.0, cost=cost,
-                        iterations=it)
+    out = []
+    for k in range(n_h):
+        try:
+            cov = sigma2[k] * np.linalg.inv(jtj[k])
+        except np.linalg.LinAlgError:
+            cov = np.diag([1e3, 1e3, 1e3])
+        rk, ik = r[k], inl[k]
+        out.append(RefineResult(
+            pose=(float(x[k, 0]), float(x[k, 1]), float(x[k, 2])), covariance=cov,
+            rms=float(np.sqrt(np.mean(rk[ik] ** 2))) if ik.any() else float('inf'),
+            inlier_fraction=float(ik.mean()) if n_p else 0.0,
+            cost=float(np.mean(np.where(ik, rk ** 2, inlier_distance ** 2))) if n_p else float('inf'),
+            iterations=it))
+    return out
+
+
+def _transform(poses: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H, N, 2) points moved by each pose, and the rotated points (relative to each origin)."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    rel = np.stack((c[:, None] * pts[:, 0] - s[:, None] * pts[:, 1],
+                    s[:, None] * pts[:, 0] + c[:, None] * pts[:, 1]), axis=2)
+    return rel + poses[:, None, :2], rel
 
 
 @dataclass(frozen=True)

@@ -144,7 +144,8 @@ def local_normals(points: np.ndarray, radius: float, half_window: int = 4,
 
     Neighbours are taken among the ``half_window`` points on each side (scan order) that lie
     within ``radius`` -- grown to 3x the distance to the nearest scan neighbour, at most
-    ``max_radius``, where the scan is sparse -- so normals do not bridge gaps. The weight ``1 - 3 l_min / l_max`` clipped to
+    ``max_radius``, where the scan is sparse -- so normals do not bridge gaps. The weight
+    ``1 - 3 l_min / l_max`` clipped to
     [0, 1] (1 on a straight wall, 0 at corners or for isolated points) lets ICP ignore
     ill-defined normals.
     """

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-SCANS = {'intel': ('intel-corrected.log.gz', 26), 'freiburg-079': ('freiburg-079-corrected.log.gz', 1000)}
+SCANS = {'intel': ('intel-corrected.log.gz', 26),
+         'freiburg-079': ('freiburg-079-corrected.log.gz', 1000)}
 POS_TOL, ANG_TOL = 0.05, np.deg2rad(1.0)            # Table 2 / Fig. 4 success
 REAL_POS_TOL, REAL_ANG_TOL = 0.15, np.deg2rad(3.0)  # real pairs success
 CORRECT_TOL = 0.1                                   # a pair (i, i') is correct within this
@@ -49,6 +50,7 @@ def _data_dir(args) -> Path:
 class Trial:
     err: np.ndarray      # (3,) x, y (m), yaw (rad)
     ms: float
+    cpu_ms: float
     rate: float          # matching rate (correct consistent pairs / inlier points of the new scan)
     coverage: float      # fraction of new inlier points whose true partner is in L
     n_candidates: int
@@ -77,11 +79,12 @@ def run_trial(ref_xy, new_xy, truth, outlier, config) -> Trial:
     from ..descriptors import candidates
     from ..matcher import match_features, prepare_scan
     from ..transforms import apply, wrap_angle
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     rf = prepare_scan(ref_xy, config)
     nf = prepare_scan(new_xy, config)
     res = match_features(rf, nf, config)
     ms = 1000.0 * (time.perf_counter() - t0)
+    cpu_ms = 1000.0 * (time.process_time() - c0)
     err = np.array(res.pose) - np.array(truth)
     err[2] = wrap_angle(err[2])
     if not np.all(np.isfinite(err)):
@@ -104,7 +107,7 @@ def run_trial(ref_xy, new_xy, truth, outlier, config) -> Trial:
     inL = np.zeros((len(rf), len(nf)), dtype=bool)
     inL[L[:, 0], L[:, 1]] = True
     cov = float(inL[partner[has], np.flatnonzero(has)].sum()) / n_in
-    return Trial(err, ms, min(rate, 1.0), cov, len(L))
+    return Trial(err, ms, cpu_ms, min(rate, 1.0), cov, len(L))
 
 
 def summarize(trials: list[Trial], pos_tol=POS_TOL, ang_tol=ANG_TOL) -> dict:
@@ -114,6 +117,7 @@ def summarize(trials: list[Trial], pos_tol=POS_TOL, ang_tol=ANG_TOL) -> dict:
     return {'n': len(trials), 'success': 100.0 * ok.mean(), 'mean': eo.mean(axis=0),
             'std': eo.std(axis=0), 'median_abs': np.median(np.abs(e), axis=0),
             'ms': float(np.median([t.ms for t in trials])),
+            'cpu_ms': float(np.median([t.cpu_ms for t in trials])),
             'rate': 100.0 * float(np.mean([t.rate for t in trials])),
             'coverage': 100.0 * float(np.mean([t.coverage for t in trials])),
             'L': float(np.mean([t.n_candidates for t in trials]))}
@@ -127,28 +131,47 @@ def table2(ref, rng, config, trials, sigma=0.01, n_out=60):
     return summarize(out)
 
 
+def true_overlap(ref_xy, new_xy, truth, dist=0.2) -> float:
+    """Fraction of the new scan's points within ``dist`` of a reference point at the true pose."""
+    from scipy.spatial import cKDTree
+
+    from ..transforms import apply
+    d, _ = cKDTree(ref_xy).query(apply(truth, new_xy), distance_upper_bound=dist)
+    return float(np.mean(d < dist))
+
+
 def real_pairs(log, rng, config, step, n_pairs):
+    """Scans k and k+step with the truth from the corrected poses, plus a random offset.
+    Also reports the success over the pairs that truly overlap by at least 50 %."""
     from ..transforms import apply, compose, inverse
     ks = rng.choice(len(log) - step, n_pairs, replace=False)
-    out = []
+    out, ovs = [], []
     for k in ks:
         ref = log.points(int(k))
         new = log.points(int(k) + step)
         rel = compose(inverse(tuple(log.poses[k])), tuple(log.poses[k + step]))
         off = random_pose(rng)
         truth = compose(rel, inverse(off))
-        out.append(run_trial(ref, apply(off, new), truth, np.zeros(len(new), bool), config))
-    return summarize(out, REAL_POS_TOL, REAL_ANG_TOL)
+        new_off = apply(off, new)
+        out.append(run_trial(ref, new_off, truth, np.zeros(len(new), bool), config))
+        ovs.append(true_overlap(ref, new_off, truth))
+    s = summarize(out, REAL_POS_TOL, REAL_ANG_TOL)
+    sub = [t for t, o in zip(out, ovs) if o >= 0.5]
+    s['n_ov'] = len(sub)
+    s['success_ov'] = summarize(sub, REAL_POS_TOL, REAL_ANG_TOL)['success'] if sub else np.nan
+    return s
 
 
 def _row_t2(label, s):
     m, sd = s['mean'], s['std']
-    return (f'{label:<24} {m[0] * 1e3:7.2f} {sd[0] * 1e3:6.2f} {m[1] * 1e3:7.2f} {sd[1] * 1e3:6.2f} '
-            f'{np.rad2deg(m[2]):7.3f} {np.rad2deg(sd[2]):6.3f} {s["success"]:6.1f} {s["ms"]:6.2f}')
+    return (f'{label:<24} {m[0] * 1e3:7.2f} {sd[0] * 1e3:6.2f} {m[1] * 1e3:7.2f} '
+            f'{sd[1] * 1e3:6.2f} '
+            f'{np.rad2deg(m[2]):7.3f} {np.rad2deg(sd[2]):6.3f} {s["success"]:6.1f} {s["ms"]:6.2f} '
+            f'{s["cpu_ms"]:6.2f}')
 
 
 T2_HEAD = (f'{"":<24} {"x mu":>7} {"x sd":>6} {"y mu":>7} {"y sd":>6} {"th mu":>7} {"th sd":>6} '
-           f'{"succ%":>6} {"ms":>6}')
+           f'{"succ%":>6} {"ms":>6} {"cpu ms":>6}')
 
 
 def run(args: argparse.Namespace) -> int:
@@ -171,7 +194,9 @@ def run(args: argparse.Namespace) -> int:
 
     if 'table2' in only:
         print(f'\n== Table 2: sigma 10 mm, 60 outliers, pose +-400 mm / +-30 deg, '
-              f'{args.trials} trials (errors in mm / deg over successes; success < 50 mm & < 1 deg)')
+              f'{args.trials} trials (errors in mm / deg over successes; success < 50 mm & < 1 deg;'
+              f' ms = median wall time per match incl. prepare_scan of both scans, cpu ms = '
+              f'median process CPU time)')
         print(T2_HEAD)
         print(f'{"paper SSM (362 pts)":<24} {0.10:7.2f} {10.40:6.2f} {-0.30:7.2f} {7.09:6.2f} '
               f'{0.02:7.3f} {0.10:6.3f}')
@@ -204,13 +229,14 @@ def run(args: argparse.Namespace) -> int:
         print(f'\n== Real pairs: scans k and k+s, truth from corrected poses, + random offset '
               f'+-400 mm / +-30 deg; {args.pairs} pairs per s; success < 150 mm & < 3 deg')
         print(f'{"":<16} {"s":>3} {"succ%":>6} {"med dx mm":>10} {"med dy mm":>10} '
-              f'{"med dth deg":>11} {"ms":>6}')
+              f'{"med dth deg":>11} {"ms":>6} {"succ% ov>=50%":>14} {"n ov>=50%":>9}')
         for name, log in logs.items():
             for step in (1, 3, 5):
                 s = real_pairs(log, np.random.default_rng(args.seed + step), cfg, step, args.pairs)
                 ma = s['median_abs']
                 print(f'{name:<16} {step:>3} {s["success"]:6.1f} {ma[0] * 1e3:10.1f} '
-                      f'{ma[1] * 1e3:10.1f} {np.rad2deg(ma[2]):11.3f} {s["ms"]:6.2f}')
+                      f'{ma[1] * 1e3:10.1f} {np.rad2deg(ma[2]):11.3f} {s["ms"]:6.2f} '
+                      f'{s["success_ov"]:14.1f} {s["n_ov"]:9d}')
 
     n_ab = args.ablation_trials
     if 'candidates' in only:
@@ -224,10 +250,12 @@ def run(args: argparse.Namespace) -> int:
                 s = table2(ref, np.random.default_rng(args.seed + 3), c, n_ab)
                 r = real_pairs(logs[name], np.random.default_rng(args.seed + 4), c, 3, n_ab)
                 print(f'{name:<16} {k:>3} {str(both):>5} {s["L"]:6.0f} {s["coverage"]:8.1f} '
-                      f'{s["success"]:8.1f} {s["ms"]:6.2f} {r["coverage"]:9.1f} {r["success"]:10.1f}')
+                      f'{s["success"]:8.1f} {s["ms"]:6.2f} {r["coverage"]:9.1f} '
+                      f'{r["success"]:10.1f}')
 
     if 'weights' in only:
-        print(f'\n== Logistic weights w of eq. 4 ({n_ab} trials; learned: scripts/learn_weights.py)')
+        print(f'\n== Logistic weights w of eq. 4 ({n_ab} trials; '
+              f'learned: scripts/learn_weights.py)')
         print(f'{"":<16} {"weights":<30} {"T2 succ%":>8} {"T2 rate%":>8} {"real s=3 succ%":>14}')
         for name, ref in refs.items():
             for label, w in (('learned', cfg.weights), ('hand-set', HAND_WEIGHTS)):

@@ -1,0 +1,69 @@
+"""``ssm_localization match``, the demo, ``plot_match`` and the scan-matching benchmark."""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pytest
+
+from scan_helpers import CARMEN, DATA, room_scan
+from ssm_localization.transforms import apply, inverse
+
+needs_carmen = pytest.mark.skipif(not (CARMEN / 'intel-corrected.log.gz').is_file(),
+                                  reason=f'shared CARMEN data not found in {CARMEN}')
+
+
+def test_plot_match_writes_png(tmp_path):
+    pytest.importorskip('matplotlib')
+    from ssm_localization import match_scans
+    from ssm_localization.plotting import plot_match
+    ref = room_scan((0.0, 0.0, 0.0))
+    truth = (0.2, -0.1, 0.3)
+    new = apply(inverse(truth), ref)
+    res = match_scans(ref, new)
+    out = plot_match(ref, new, res.pose, tmp_path / 'm.png', pairs=res.inliers, truth=truth,
+                     title='test')
+    assert out.is_file() and out.read_bytes()[:4] == b'\x89PNG'
+    # a failed match (NaN pose) still plots
+    out2 = plot_match(ref, new, (np.nan, np.nan, np.nan), tmp_path / 'f.png')
+    assert out2.is_file()
+
+
+@needs_carmen
+def test_match_command(tmp_path, capsys):
+    pytest.importorskip('matplotlib')
+    from ssm_localization.cli import match_cmd
+    p = argparse.ArgumentParser()
+    match_cmd.add_arguments(p)
+    args = p.parse_args([str(CARMEN / 'freiburg-079-corrected.log.gz'), '--k', '200', '--s', '2',
+                         '--offset', '0.3', '-0.2', '20', '--plot', str(tmp_path / 'm.png')])
+    assert match_cmd.run(args) == 0
+    text = capsys.readouterr().out
+    assert 'estimate' in text and 'truth' in text and 'error' in text
+    err_mm = float(text.split('error')[1].split('mm')[0])
+    assert err_mm < 150
+    assert (tmp_path / 'm.png').is_file()
+    bad = p.parse_args([str(CARMEN / 'intel-corrected.log.gz'), '--k', '5000'])
+    with pytest.raises(ValueError, match='--k'):
+        match_cmd.run(bad)
+
+
+@needs_carmen
+def test_demo(tmp_path, capsys):
+    pytest.importorskip('matplotlib')
+    from ssm_localization import demo
+    assert demo.main(['--out', str(tmp_path), '--data', str(DATA)]) == 0
+    assert (tmp_path / 'scan_match.png').is_file()
+    assert 'error' in capsys.readouterr().out
+
+
+@needs_carmen
+def test_bench_quick_runs(capsys):
+    from ssm_localization.bench import scanmatch
+    p = argparse.ArgumentParser()
+    scanmatch.add_arguments(p)
+    args = p.parse_args(['--quick', '--only', 'table2', '--trials', '5', '--data', str(DATA)])
+    args.quick = False          # keep --trials 5
+    assert scanmatch.run(args) == 0
+    out = capsys.readouterr().out
+    assert 'Table 2' in out and 'intel' in out and 'freiburg-079' in out
