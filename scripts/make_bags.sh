@@ -20,7 +20,9 @@ mkdir -p maps bags
 # Simulated queries on the nav2 depot map: clean 360-degree scans, and cluttered 180-degree ones.
 "$SSM" simulate "$DATA/maps/depot.yaml" -o bags/depot_sim -n 30 --beams 360 --fov 360 \
     --noise 0.01 --clutter 0 --short-fraction 0 --seed 0 --force --quiet
-"$SSM" simulate "$DATA/maps/depot.yaml" -o bags/depot_sim_clutter_fov180 -n 20 --beams 360 \
-    --fov 180 --noise 0.01 --clutter 8 --short-fraction 0.05 --seed 1 --force --quiet
+"$SSM" simulate "$DATA/maps/depot.yaml" -o bags/depot_sim_clutter -n 20 --beams 360 \
+    --fov 360 --noise 0.01 --clutter 8 --short-fraction 0.05 --seed 1 --force --quiet
+"$SSM" simulate "$DATA/maps/depot.yaml" -o bags/depot_sim_fov180 -n 20 --beams 180 \
+    --fov 180 --noise 0.01 --clutter 0 --short-fraction 0 --seed 2 --force --quiet
 
 du -ab maps bags | sort -k2

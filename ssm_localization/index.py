@@ -294,6 +294,7 @@ def load_index_config(path: str | Path) -> IndexConfig:
         section = node_section(data, 'global_localizer')
     if any('.' in str(key) for key in section):
         section = unflatten(section)
+    laser = [section.get(k) for k in ('laser_x', 'laser_y', 'laser_yaw')]
     if isinstance(section.get('index'), dict):
         section = section['index']
     idx_names = {f.name for f in dataclasses.fields(IndexConfig)}
@@ -311,6 +312,8 @@ def load_index_config(path: str | Path) -> IndexConfig:
             kwargs[key] = value  # from_dict names the unknown key
     if topo:
         kwargs['topology'] = topo
+    if any(v is not None for v in laser):   # the nodes' laser_x/y/yaw: the laser on the base
+        kwargs['sensor_pose'] = [float(v or 0.0) for v in laser]
     try:
         return from_dict(IndexConfig, kwargs)
     except ValueError as exc:

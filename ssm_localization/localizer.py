@@ -167,8 +167,8 @@ class GlobalLocalizer:
                       range_min: float = 0.0, range_max: float = float('inf')) -> Localization:
         """Localize a LaserScan given by its ranges and beam geometry."""
         t0 = time.perf_counter()
-        ranges = np.asarray(ranges, dtype=float).ravel()
         try:
+            ranges = np.asarray(ranges, dtype=float).ravel()
             points, idx = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
         except ValueError as exc:
             return self._failed(t0, f'bad scan: {exc}')
@@ -181,7 +181,12 @@ class GlobalLocalizer:
     def localize_points(self, points_xy: np.ndarray) -> Localization:
         """Localize laser-frame points given in scan order (no no-return information)."""
         t0 = time.perf_counter()
-        pts = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+        try:
+            pts = np.asarray(points_xy, dtype=float)
+            if pts.ndim != 2 or pts.shape[1] != 2:
+                raise ValueError(f'expected (N, 2) points, got shape {pts.shape}')
+        except (TypeError, ValueError) as exc:
+            return self._failed(t0, f'bad points: {exc}')
         pts = pts[np.all(np.isfinite(pts), axis=1)]
         return self._localize(pts, np.arctan2(pts[:, 1], pts[:, 0]), np.hypot(pts[:, 0], pts[:, 1]), t0)
 

@@ -217,9 +217,9 @@ def match_features(ref: ScanFeatures, new: ScanFeatures,
     """Match two prepared scans; never raises on degenerate input (returns ``ok=False``).
 
     Beyond the paper: when the pose explains less than ``retry_overlap`` of the new scan, the
-    correspondences of that cluster are removed from G and the next cluster is tried (up to
-    ``retries`` times); the pose with the largest overlap wins. ``score`` is always eq. 5 of the
-    first (paper) solution.
+    next distinct RANSAC hypotheses are refined (``ransac_hypotheses``), then the inliers of that
+    cluster are removed from G and the next spectral cluster is tried (``retries`` times); the
+    pose with the largest overlap wins. ``score`` is always eq. 5 of the first (paper) solution.
     """
     config = config or MatcherConfig()
     if ref.is_degenerate or new.is_degenerate:

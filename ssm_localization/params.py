@@ -6,7 +6,7 @@ One file serves the CLI and the ROS nodes: either a plain mapping, or a ROS 2 pa
     global_localizer:
       ros__parameters:
         localizer: {top_n: 5, sigma_d: 0.05}
-        index: {beams: 360, topology: {arc_spacing: 2.5}, matcher: {point_budget: 120}}
+        index: {beams: 360, topology: {arc_spacing: 2.5}, matcher: {max_points: 100}}
 
 ROS flattens nested mappings to dotted names (``localizer.top_n``); :func:`unflatten` undoes it.
 Unknown keys raise ``ValueError`` naming the key, so typos do not pass silently.
@@ -125,19 +125,30 @@ def _coerce(value: Any, default: Any, hint: Any, name: str) -> Any:
             return value
         if default is None:
             return value
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f'parameter {name}: expected {type(default).__name__} like '
                          f'{default!r}, got {value!r}') from None
     return value
+
+
+#: keys of a flat params file; a ROS params file may also hold the nodes' own parameters
+KNOWN_TOP_LEVEL = ('index', 'localizer', 'laser_x', 'laser_y', 'laser_yaw')
 
 
 def load_configs(path: str | Path | None, node: str = 'global_localizer'):
     """``(IndexConfig, LocalizerConfig)`` from a params file (defaults where absent)."""
     from .index import IndexConfig
     from .localizer import LocalizerConfig
-    section = node_section(load_yaml_mapping(path), node) if path else {}
-    section = unflatten(section) if any('.' in k for k in section) else section
+    data = load_yaml_mapping(path) if path else {}
+    ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
+    section = node_section(data, node)
     try:
+        if any('.' in str(k) for k in section):
+            section = unflatten({str(k): v for k, v in section.items()})
+        unknown = sorted(str(k) for k in section if k not in KNOWN_TOP_LEVEL)
+        if unknown and not ros_file:
+            raise ValueError(f'unknown parameter {unknown[0]!r} (known: index, localizer, '
+                             'laser_x, laser_y, laser_yaw)')
         index_cfg = from_dict(IndexConfig, section.get('index'), 'index.')
         loc_cfg = from_dict(LocalizerConfig, section.get('localizer'), 'localizer.')
         laser = [section.get(k) for k in ('laser_x', 'laser_y', 'laser_yaw')]

@@ -111,7 +111,7 @@ def refine_pose(surface: SurfaceModel, points: np.ndarray, pose: Pose2, **kwargs
 
 
 def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *,
-                 iterations: int = 12, huber: float = 0.03,
+                 iterations: int = 12, huber: float = 0.1,
                  truncate: tuple[float, float] = (0.3, 0.1), inlier_distance: float = 0.1,
                  min_sigma: float = 0.005) -> list[RefineResult]:
     """Gauss-Newton on ``sum rho(sdf(R p + t))`` for several laser poses at once (batched).
@@ -127,7 +127,7 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
     jtj = np.tile(np.eye(3), (n_h, 1, 1))
     sigma2 = np.full(n_h, min_sigma ** 2)
     active = np.ones(n_h, dtype=bool)
-    it = 0
+    done_iters = np.zeros(n_h, dtype=int)
     for it in range(1, iterations + 1):
         if n_p < 3 or not active.any():
             break
@@ -152,6 +152,7 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
                                     / np.maximum(use[ok].sum(axis=1) - 3, 1), min_sigma ** 2)
         x += step
         x[:, 2] = wrap_angle(x[:, 2])
+        done_iters[ok] = it
         active &= enough & ((np.hypot(step[:, 0], step[:, 1]) >= 1e-5) | (np.abs(step[:, 2]) >= 1e-6))
     world, _ = _transform(x, pts)
     r, _, valid = surface.signed_distance(world.reshape(-1, 2))
@@ -169,7 +170,7 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
             rms=float(np.sqrt(np.mean(rk[ik] ** 2))) if ik.any() else float('inf'),
             inlier_fraction=float(ik.mean()) if n_p else 0.0,
             cost=float(np.mean(np.where(ik, rk ** 2, inlier_distance ** 2))) if n_p else float('inf'),
-            iterations=it))
+            iterations=int(done_iters[k])))
     return out
 
 

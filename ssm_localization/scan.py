@@ -372,10 +372,10 @@ def prepare_scan(points_xy, config: 'MatcherConfig | None' = None) -> ScanFeatur
         # oriented geometrically (counterclockwise about the sensor): no scan order involved,
         # so interleaved outliers or a clockwise scanner cannot flip it
         u = robust_tangents(pts, ctx, config.tangent_radius, 1.0, offsets)
+    cw = length_weights(ctx, config.context_spacing, config.length_cap) \
+        if config.length_cap > 0 else None
     desc = shape_context(pts, u, config.desc_radius, config.desc_radial_bins,
-                         config.desc_angular_bins, context=ctx, offsets=offsets,
-                         weights=length_weights(ctx, config.context_spacing, config.length_cap)
-                         if config.length_cap > 0 else None)
+                         config.desc_angular_bins, context=ctx, offsets=offsets, weights=cw)
     fine = p[downsample_even(p, config.icp_max_points, config.icp_min_spacing)]
     fn, fw = local_normals(fine, config.normal_radius)
     return ScanFeatures(points=pts, tangents=u, descriptors=desc, source_index=src,

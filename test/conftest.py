@@ -18,7 +18,7 @@ from typing import Any, Callable
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_MAPS = Path('/work/shared/data/maps')
+SHARED_MAPS = REPO.parent / 'shared' / 'data' / 'maps'
 BAGS = REPO / 'bags'
 
 _RNG = random.Random(os.getpid() ^ time.time_ns())

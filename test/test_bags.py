@@ -169,7 +169,8 @@ REPO = Path(__file__).resolve().parents[1]
 COMMITTED = {
     'intel_queries': {'/map': 1, '/scan': 91, '/ground_truth': 91, '/odom': 91},
     'depot_sim': {'/map': 1, '/scan': 30, '/ground_truth': 30},
-    'depot_sim_clutter_fov180': {'/map': 1, '/scan': 20, '/ground_truth': 20},
+    'depot_sim_clutter': {'/map': 1, '/scan': 20, '/ground_truth': 20},
+    'depot_sim_fov180': {'/map': 1, '/scan': 20, '/ground_truth': 20},
 }
 
 

@@ -14,7 +14,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     'index': ('index_cmd', 'build the topological index (GVD nodes + virtual scans) of a map'),
     'replay': ('replay_cmd', 'localize every scan of a bag offline and write RESULTS.csv'),
     'play': ('play_cmd', 'publish a bag on live ROS topics (map latched)'),
-    'match': ('match_cmd', 'match two scans of a CARMEN log or bag and plot the result'),
+    'match': ('match_cmd', 'match two scans of a CARMEN log and plot the result'),
     'convert-carmen': ('carmen_cmd', 'convert a CARMEN log into a map (YAML+PGM) and mcap bags'),
     'simulate': ('simulate_cmd', 'generate a simulated query bag on a map'),
     'bench': ('bench_cmd', 'benchmarks: scanmatch, index, localize'),

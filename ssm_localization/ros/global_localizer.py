@@ -358,7 +358,12 @@ class GlobalLocalizerNode(Node):
             if reason:
                 self.get_logger().info(f'not localizing: {reason}', throttle_duration_sec=5.0)
                 continue
-            loc, reason = self.localize_msg(msg, verbose=False)
+            try:
+                loc, reason = self.localize_msg(msg, verbose=False)
+            except Exception:   # publishing fails once Ctrl-C has shut the context down
+                if not self.context.ok():
+                    return
+                raise
             if reason and loc is not None:
                 self.get_logger().info(f'no pose: {reason}', throttle_duration_sec=2.0)
 
