@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 
 from .descriptors import descriptor_distances
 from .index import MapIndex
-from .matcher import match_features, spectral_score
+from .matcher import match_features, spectral_score, spectral_solution
 from .raycast import RayCaster
 from .refine import BeamCheck, SurfaceModel, check_beams, refine_poses
 from .scan import prepare_scan, ranges_to_points
@@ -43,6 +43,8 @@ class LocalizerConfig:
     laser_pose: Pose2 = (0.0, 0.0, 0.0)   # the laser's pose on the robot base (x, y, yaw)
     paper_mode: bool = False          # plain paper pipeline: no prefilter, refinement or checks
     fine_icp: bool = True             # matcher ICP in the fine stage (better hypotheses on real scans)
+    fine_icp_iterations: int = 15     # matcher ICP iterations per candidate
+    fine_polish: bool = True          # matcher least-squares polish after its ICP
     fine_retries: int = 0             # matcher retries on further spectral clusters per candidate
     refine: bool = True               # Gauss-Newton on the map's wall surface
     surface_depth: float = 0.5        # cells behind the occupied-cell boundary where walls are
@@ -72,6 +74,7 @@ class Hypothesis:
 
     node: int
     spectral: float
+    solution: tuple | None = field(default=None, repr=False)   # eqs. (2)-(6), reused by fine
     vicinity: float = 0.0
     laser_pose: Pose2 = (0.0, 0.0, 0.0)
     pose: Pose2 = (0.0, 0.0, 0.0)           # base pose in the map frame
@@ -145,8 +148,9 @@ class GlobalLocalizer:
         self.matcher_config = index.config.matcher
         # the fine stage only needs a pose good enough for the map refinement to converge
         self.fine_config = dataclasses.replace(
-            self.matcher_config, icp=self.config.fine_icp, polish=self.config.fine_icp,
-            retries=self.config.fine_retries)
+            self.matcher_config, icp=self.config.fine_icp,
+            icp_iterations=self.config.fine_icp_iterations,
+            polish=self.config.fine_icp and self.config.fine_polish, retries=self.config.fine_retries)
         if len(index.features) == 0:
             raise ValueError('the map index has no nodes: nothing to localize against')
         self._node_trees = [cKDTree(f.points) if len(f.points) else None for f in index.features]
@@ -216,8 +220,9 @@ class GlobalLocalizer:
         """Eq. (5)-(6) score of every node in ``nodes``; the ``top_n`` best (section IV.A)."""
         scored = []
         for k in nodes:
-            s, _ = spectral_score(self.index.features[k], query, self.matcher_config)
-            scored.append(Hypothesis(node=int(k), spectral=float(s)))
+            sol = spectral_solution(self.index.features[k], query, self.matcher_config)
+            s, _ = spectral_score(self.index.features[k], query, self.matcher_config, sol)
+            scored.append(Hypothesis(node=int(k), spectral=float(s), solution=sol))
         scored.sort(key=lambda h: -h.spectral)
         return scored[:self.config.top_n]
 
@@ -227,7 +232,8 @@ class GlobalLocalizer:
         out = []
         for h in hyps:
             feats = self.index.features[h.node]
-            m = match_features(feats, query, self.fine_config)
+            m = match_features(feats, query, self.fine_config, h.solution)
+            h.solution = None
             if not m.ok:
                 continue
             h.n_pairs = len(m.pairs)

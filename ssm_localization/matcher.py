@@ -139,14 +139,25 @@ def _spectral(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig):
     return L, G, x, sel, matching_score(G, sel)
 
 
-def spectral_score(ref: ScanFeatures, new: ScanFeatures,
-                   config: MatcherConfig | None = None) -> tuple[float, np.ndarray]:
-    """Coarse stage: ``(E, pairs)`` with E = eq. 5 at the binarized eq. 6 solution and ``pairs``
-    (K, 2) indices into the callers' arrays (``source_index``). ``(0.0, empty)`` if degenerate."""
+def spectral_solution(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig | None = None):
+    """Eqs. (2)-(6) for two prepared scans: ``(L, G, x*, selection, E)``, or None if degenerate.
+
+    Pass it to :func:`match_features` as ``solution`` to reuse the coarse stage's work.
+    """
     config = config or MatcherConfig()
     if ref.is_degenerate or new.is_degenerate:
+        return None
+    return _spectral(ref, new, config)
+
+
+def spectral_score(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig | None = None,
+                   solution=None) -> tuple[float, np.ndarray]:
+    """Coarse stage: ``(E, pairs)`` with E = eq. 5 at the binarized eq. 6 solution and ``pairs``
+    (K, 2) indices into the callers' arrays (``source_index``). ``(0.0, empty)`` if degenerate."""
+    solution = solution or spectral_solution(ref, new, config)
+    if solution is None:
         return 0.0, np.zeros((0, 2), dtype=np.int64)
-    L, _, _, sel, score = _spectral(ref, new, config)
+    L, _, _, sel, score = solution
     q = L[sel]
     return score, np.column_stack((ref.source_index[q[:, 0]], new.source_index[q[:, 1]]))
 
@@ -212,19 +223,20 @@ def _estimate(ref: ScanFeatures, new: ScanFeatures, q: np.ndarray, xq: np.ndarra
     return pose, mask, rms, ov
 
 
-def match_features(ref: ScanFeatures, new: ScanFeatures,
-                   config: MatcherConfig | None = None) -> MatchResult:
+def match_features(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig | None = None,
+                   solution=None) -> MatchResult:
     """Match two prepared scans; never raises on degenerate input (returns ``ok=False``).
 
     Beyond the paper: when the pose explains less than ``retry_overlap`` of the new scan, the
     next distinct RANSAC hypotheses are refined (``ransac_hypotheses``), then the inliers of that
     cluster are removed from G and the next spectral cluster is tried (``retries`` times); the
     pose with the largest overlap wins. ``score`` is always eq. 5 of the first (paper) solution.
+    ``solution``: the :func:`spectral_solution` of these scans with these settings, if known.
     """
     config = config or MatcherConfig()
     if ref.is_degenerate or new.is_degenerate:
         return _empty('degenerate scan (fewer than 3 points or collinear)')
-    L, G, x, sel, score = _spectral(ref, new, config)
+    L, G, x, sel, score = solution or _spectral(ref, new, config)
     best = None
     last = None
     for attempt in range(1 + max(config.retries, 0)):

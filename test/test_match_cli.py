@@ -54,7 +54,11 @@ def test_demo(tmp_path, capsys):
     from ssm_localization import demo
     assert demo.main(['--out', str(tmp_path), '--data', str(DATA)]) == 0
     assert (tmp_path / 'scan_match.png').is_file()
-    assert 'error' in capsys.readouterr().out
+    assert (tmp_path / 'intel_replay.png').stat().st_size > 0
+    rows = (tmp_path / 'intel_results.csv').read_text().splitlines()
+    assert rows[0].startswith('stamp,x,y,yaw,status,latency_ms,node,score') and len(rows) > 50
+    out = capsys.readouterr().out
+    assert 'error' in out and 'success' in out and 'precision' in out
 
 
 @needs_carmen
