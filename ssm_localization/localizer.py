@@ -46,6 +46,7 @@ class LocalizerConfig:
     fine_icp_iterations: int = 15     # matcher ICP iterations per candidate
     fine_polish: bool = True          # matcher least-squares polish after its ICP
     fine_retries: int = 0             # matcher retries on further spectral clusters per candidate
+    fine_ransac_hypotheses: int = 3   # RANSAC hypotheses the matcher may refine per candidate
     refine: bool = True               # Gauss-Newton on the map's wall surface
     surface_depth: float = 0.5        # cells behind the occupied-cell boundary where walls are
     refine_iterations: int = 12
@@ -146,11 +147,15 @@ class GlobalLocalizer:
         self.index = index
         self.config = config or LocalizerConfig()
         self.matcher_config = index.config.matcher
-        # the fine stage only needs a pose good enough for the map refinement to converge
-        self.fine_config = dataclasses.replace(
-            self.matcher_config, icp=self.config.fine_icp,
-            icp_iterations=self.config.fine_icp_iterations,
-            polish=self.config.fine_icp and self.config.fine_polish, retries=self.config.fine_retries)
+        cfg = self.config
+        if cfg.paper_mode:   # section II.C as written: RANSAC + least squares, nothing more
+            self.fine_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
+                                                   retries=0, ransac_hypotheses=1)
+        else:
+            self.fine_config = dataclasses.replace(
+                self.matcher_config, icp=cfg.fine_icp, icp_iterations=cfg.fine_icp_iterations,
+                polish=cfg.fine_icp and cfg.fine_polish, retries=cfg.fine_retries,
+                ransac_hypotheses=cfg.fine_ransac_hypotheses)
         if len(index.features) == 0:
             raise ValueError('the map index has no nodes: nothing to localize against')
         self._node_trees = [cKDTree(f.points) if len(f.points) else None for f in index.features]

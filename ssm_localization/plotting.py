@@ -9,17 +9,24 @@ def _pyplot():
     return plt
 
 
-def plot_replay(index, rows, path, title: str = '') -> None:
-    """Map, topological nodes, ground truth and estimates (colored by status) of a replay."""
+def _map_figure(grid, width: float, extra_height: float):
+    """A figure showing ``grid`` (OccupancyMap) in map coordinates: ``(plt, fig, ax, extent)``."""
     import numpy as np
     plt = _pyplot()
-    grid = index.map
     h, w = grid.data.shape
     ox, oy, _ = grid.origin
     extent = (ox, ox + w * grid.resolution, oy, oy + h * grid.resolution)
     img = np.where(grid.data < 0, 0.75, 1.0 - np.clip(grid.data, 0, 100) / 100.0)
-    fig, ax = plt.subplots(figsize=(9, 9 * h / max(w, 1) + 0.5))
-    ax.imshow(img, cmap='gray', origin='lower', extent=extent, vmin=0, vmax=1)
+    fig, ax = plt.subplots(figsize=(width, width * h / max(w, 1) + extra_height))
+    ax.imshow(img, cmap='gray', origin='lower', extent=extent, vmin=0, vmax=1,
+              interpolation='nearest')
+    return plt, fig, ax, extent
+
+
+def plot_replay(index, rows, path, title: str = '') -> None:
+    """Map, topological nodes, ground truth and estimates (colored by status) of a replay."""
+    import numpy as np
+    plt, fig, ax, _ = _map_figure(index.map, 9, 0.5)
     ax.scatter(index.node_xy[:, 0], index.node_xy[:, 1], s=6, c='tab:blue', alpha=0.5,
                label='nodes')
     colors = {'ok': 'tab:green', 'ambiguous': 'tab:orange', 'failed': 'tab:red'}
@@ -51,15 +58,8 @@ def plot_index(index, path, title: str = '', show_ids: bool = True) -> None:
     """Map, GVD and topological nodes (colored by kind, with their ids) of a ``MapIndex``."""
     import numpy as np
     from .topology import NODE_KIND_NAMES
-    plt = _pyplot()
-    grid = index.map
-    h, w = grid.data.shape
-    ox, oy, _ = grid.origin
-    extent = (ox, ox + w * grid.resolution, oy, oy + h * grid.resolution)
-    img = np.where(grid.data < 0, 0.75, 1.0 - np.clip(grid.data, 0, 100) / 100.0)
-    fig, ax = plt.subplots(figsize=(10, 10 * h / max(w, 1) + 0.8))
-    ax.imshow(img, cmap='gray', origin='lower', extent=extent, vmin=0, vmax=1,
-              interpolation='nearest')
+    plt, fig, ax, extent = _map_figure(index.map, 10, 0.8)
+    h, w = index.map.data.shape
     gvd = np.ma.masked_where(~np.asarray(index.gvd_mask, dtype=bool), np.ones((h, w)))
     ax.imshow(gvd, cmap='autumn', origin='lower', extent=extent, alpha=0.6,
               interpolation='nearest')
