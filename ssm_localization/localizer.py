@@ -1,16 +1,17 @@
 """Global localization of one laser scan on an indexed map (paper section IV, and beyond).
 
 Pipeline for one query scan (laser frame points ``q``):
-1. prefilter: every query descriptor votes for the nodes owning its nearest node descriptors
-   (one KD-tree query over all nodes, built at start-up); the ``prefilter`` best nodes go on;
+1. prefilter (beyond the paper): every query descriptor votes for the ``vote_neighbours`` nodes
+   holding its nearest descriptors (one distance matrix against all node descriptors, stacked at
+   start-up); the ``prefilter`` most voted nodes go on;
 2. coarse (IV.A): rank those nodes by the spectral matching score (eq. 5 at the binarized
    solution of eq. 6); keep the top ``top_n``;
 3. fine (IV.B): RANSAC pose of the query against each candidate's virtual scan, vicinity score
    (eq. 10, ``sigma_d``); the node frame turns the local pose into a map-frame laser pose;
 4. beyond the paper: each hypothesis is refined on the map's wall surface (``refine.py``) and
    verified by ray casting; the status is ``ok`` / ``ambiguous`` / ``failed``.
-With ``paper_mode=True`` steps 1 and 4 are skipped and the largest vicinity score wins, which is
-the plain method of the paper (the benchmark compares both).
+With ``paper_mode=True`` steps 1 and 4 and the matcher's ICP are skipped and the largest
+vicinity score wins: the plain method of the paper (``bench localize --paper`` compares both).
 """
 from __future__ import annotations
 
@@ -50,6 +51,7 @@ class LocalizerConfig:
     refine: bool = True               # Gauss-Newton on the map's wall surface
     surface_depth: float = 0.5        # cells behind the occupied-cell boundary where walls are
     refine_iterations: int = 12
+    refine_radius: tuple[float, float] = (0.3, 0.1)   # truncation radius, first to last iteration (m)
     max_cast_range: float = 30.0      # ray-cast range for the beam check, metres
     beam_tolerance: float = 0.15      # metres (+2 % of the range) for a beam to agree with the map
     min_consistent: float = 0.5       # fewer beams agreeing with the map rejects a hypothesis
@@ -83,7 +85,6 @@ class Hypothesis:
     check: BeamCheck | None = None
     cost: float = float('inf')              # mean truncated squared surface residual (m^2)
     fit: float = float('inf')               # cost normalized, plus the through-wall penalty
-    n_pairs: int = 0
 
     @property
     def score(self) -> float:
@@ -139,8 +140,8 @@ def _distinct(a: Pose2, b: Pose2, cfg: LocalizerConfig) -> bool:
 class GlobalLocalizer:
     """Single-scan global localization against a :class:`MapIndex`.
 
-    Everything that depends on the map only (node KD-trees, the descriptor vote tree, the wall
-    surface model) is built here once; ``localize_*`` does per-scan work only.
+    Everything that depends on the map only (node KD-trees, the stacked node descriptors, the
+    ray caster, the wall surface model) is built here once; ``localize_*`` does per-scan work.
     """
 
     def __init__(self, index: MapIndex, config: LocalizerConfig | None = None):
@@ -241,7 +242,6 @@ class GlobalLocalizer:
             h.solution = None
             if not m.ok:
                 continue
-            h.n_pairs = len(m.pairs)
             h.vicinity = vicinity_score(feats.points, query.points, m.pose, self.config.sigma_d,
                                         self._node_trees[h.node])
             h.laser_pose = compose(tuple(self.index.node_sensor_pose[h.node]), m.pose)
@@ -260,12 +260,13 @@ class GlobalLocalizer:
             return []
         results = refine_poses(self._surface, points, np.array([h.laser_pose for h in todo]),
                                iterations=cfg.refine_iterations if cfg.refine else 0,
-                               inlier_distance=cfg.inlier_distance)
+                               truncate=cfg.refine_radius, inlier_distance=cfg.inlier_distance)
+        base_from_laser = inverse(cfg.laser_pose)
         out: list[Hypothesis] = []
         for h, r in zip(todo, results):
             h.laser_pose, h.cost = r.pose, r.cost
             h.covariance = self._base_covariance(r.covariance, h.laser_pose)
-            h.pose = compose(h.laser_pose, inverse(cfg.laser_pose))
+            h.pose = compose(h.laser_pose, base_from_laser)
             if not any(_same(h.laser_pose, o.laser_pose) for o in out):
                 out.append(h)
         return out
@@ -318,16 +319,15 @@ class GlobalLocalizer:
         hyps = self._refine_unique(hyps, points)
         self.beam_check(hyps, angles, beams)
         hyps.sort(key=lambda h: (not h.plausible(cfg), h.fit))
-        best = hyps[0] if hyps[0].plausible(cfg) else None
+        best = hyps[0]
         ms = (time.perf_counter() - t0) * 1e3
-        if best is None:
-            worst = hyps[0]
-            return Localization(status='failed', pose=worst.pose, node=worst.node,
-                                score=worst.score, candidates=hyps, latency_ms=ms,
+        if not best.plausible(cfg):      # the best-fitting pose is kept only for diagnosis
+            return Localization(status='failed', pose=best.pose, node=best.node,
+                                score=best.score, candidates=hyps, latency_ms=ms,
                                 message=(f'no hypothesis agrees with the map (best fit: agree '
-                                         f'{worst.check.consistent:.0%}, through walls '
-                                         f'{worst.check.contradicting:.0%})'))
-        rivals = [h for h in hyps if h is not best and h.plausible(cfg) and _distinct(h.pose, best.pose, cfg)
+                                         f'{best.check.consistent:.0%}, through walls '
+                                         f'{best.check.contradicting:.0%})'))
+        rivals = [h for h in hyps[1:] if h.plausible(cfg) and _distinct(h.pose, best.pose, cfg)
                   and h.fit <= best.fit * cfg.ambiguity_ratio]
         cov = best.covariance
         if rivals:
