@@ -57,6 +57,7 @@ class LocalizerConfig:
     min_consistent: float = 0.5       # fewer beams agreeing with the map rejects a hypothesis
     max_contradicting: float = 0.3    # more beams seeing through walls rejects it
     contradiction_weight: float = 2.0  # fit = cost / inlier_distance^2 + this * through-wall fraction
+    max_fit: float = 0.75             # a best fit above this explains too little of the scan: failed
     ambiguity_ratio: float = 1.5      # a distinct rival whose fit is within this factor: ambiguous
     inlier_distance: float = 0.1      # endpoints further from the walls count as outliers (m)
     distinct_xy: float = 0.5          # poses further apart than this are distinct (m) ...
@@ -327,6 +328,11 @@ class GlobalLocalizer:
                                 message=(f'no hypothesis agrees with the map (best fit: agree '
                                          f'{best.check.consistent:.0%}, through walls '
                                          f'{best.check.contradicting:.0%})'))
+        if best.fit > cfg.max_fit:
+            return Localization(status='failed', pose=best.pose, node=best.node,
+                                score=best.score, candidates=hyps, latency_ms=ms,
+                                message=(f'the best pose explains too little of the scan (fit '
+                                         f'{best.fit:.2f} > {cfg.max_fit})'))
         rivals = [h for h in hyps[1:] if h.plausible(cfg) and _distinct(h.pose, best.pose, cfg)
                   and h.fit <= best.fit * cfg.ambiguity_ratio]
         cov = best.covariance
