@@ -36,7 +36,7 @@ from ssm_localization.ros.conversions import (pose_with_covariance, scan_args_fr
 from ssm_localization.ros.map_indexer import (GENERIC, LASER_PARAMS, LATCHED_QOS, MAP_PARAMS,
                                               IndexBuilder, build_config, config_parameter_table,
                                               declare_table, indexer_parameters, laser_pose_of,
-                                              map_from_msg, spin)
+                                              spin, usable_map)
 
 MODES = ('on_demand', 'continuous')
 MARKER_PERIOD = 1.0   # seconds between marker updates in continuous mode
@@ -213,10 +213,8 @@ class GlobalLocalizerNode(Node):
         return (index, *self._make_localizer(index))
 
     def _on_map(self, msg: OccupancyGrid) -> None:
-        try:
-            occ = map_from_msg(msg, self.max_map_cells)
-        except (ValueError, AttributeError) as exc:
-            self.get_logger().warning(f'ignoring map: {exc}')
+        occ = usable_map(msg, self.max_map_cells, self.get_logger())
+        if occ is None:
             return
         checksum = occ.checksum()
         with self._state_lock:

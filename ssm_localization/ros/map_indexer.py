@@ -304,6 +304,15 @@ def map_from_msg(msg: OccupancyGrid, max_cells: int):
     return occ
 
 
+def usable_map(msg: OccupancyGrid, max_cells: int, logger):
+    """:func:`map_from_msg`, or None after a logged warning: bad maps never stop a node."""
+    try:
+        return map_from_msg(msg, max_cells)
+    except (ValueError, AttributeError) as exc:
+        logger.warning(f'ignoring map: {exc}')
+        return None
+
+
 # --------------------------------------------------------------------------- node
 
 class MapIndexerNode(Node):
@@ -327,10 +336,8 @@ class MapIndexerNode(Node):
         self.get_logger().info(f'waiting for a map on {self.resolve_topic_name("map")}')
 
     def _on_map(self, msg: OccupancyGrid) -> None:
-        try:
-            occ = map_from_msg(msg, self.max_map_cells)
-        except (ValueError, AttributeError) as exc:
-            self.get_logger().warning(f'ignoring map: {exc}')
+        occ = usable_map(msg, self.max_map_cells, self.get_logger())
+        if occ is None:
             return
         label = f'map {occ.width}x{occ.height} @ {occ.resolution:g} m ({occ.checksum()[:8]})'
         self.get_logger().info(f'{label}: indexing')
