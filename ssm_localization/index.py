@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from .map_io import OccupancyMap
 from .matcher import MatcherConfig
@@ -32,7 +31,7 @@ from .transforms import compose
 FORMAT_VERSION = 1
 
 __all__ = ['FORMAT_VERSION', 'IndexConfig', 'MapIndex', 'NodeKind', 'NODE_KIND_NAMES',
-           'build_index', 'save_index', 'load_index', 'load_index_config', 'distance_field']
+           'build_index', 'save_index', 'load_index', 'load_index_config']
 
 
 @dataclass(frozen=True)
@@ -85,9 +84,8 @@ class MapIndex:
     (:class:`NodeKind`), ``node_sensor_pose[k]`` the virtual laser's pose (map frame),
     ``ranges[k]`` its virtual scan over ``beam_angles`` (inf: no return), ``features[k]`` the
     matcher features of that scan (points in the laser frame). ``gvd_mask`` (H, W) bool,
-    ``distance_field`` (H, W) float32: metres from each cell centre to the nearest occupied cell
-    centre (inf if the map has none). ``edges`` (E, 2) node pairs adjacent along the GVD,
-    ``node_clearance`` (K,) brushfire distance (m) at the nodes."""
+    ``edges`` (E, 2) node pairs adjacent along the GVD, ``node_clearance`` (K,) brushfire
+    distance (m) at the nodes. (The localizer derives its wall model from ``map`` at start-up.)"""
 
     map: OccupancyMap
     node_xy: np.ndarray
@@ -97,7 +95,6 @@ class MapIndex:
     beam_angles: np.ndarray
     features: list[ScanFeatures]
     gvd_mask: np.ndarray
-    distance_field: np.ndarray
     config: IndexConfig
     map_checksum: str
     version: int = FORMAT_VERSION
@@ -111,14 +108,6 @@ class MapIndex:
         counts = np.bincount(np.asarray(self.node_kind, dtype=np.int64),
                              minlength=len(NODE_KIND_NAMES))
         return {name: int(counts[i]) for i, name in enumerate(NODE_KIND_NAMES)}
-
-
-def distance_field(occ_map: OccupancyMap, occupied_thresh: int = 65) -> np.ndarray:
-    """Metres (float32, (H, W)) from each cell centre to the nearest occupied cell centre."""
-    occ = occ_map.occupied_mask(occupied_thresh)
-    if not occ.any():
-        return np.full(occ.shape, np.inf, dtype=np.float32)
-    return (ndimage.distance_transform_edt(~occ) * occ_map.resolution).astype(np.float32)
 
 
 def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
@@ -157,8 +146,7 @@ def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
     report(k, k, 'done')
     return MapIndex(map=occ_map, node_xy=topo.node_xy, node_kind=topo.node_kind,
                     node_sensor_pose=poses, ranges=ranges, beam_angles=angles,
-                    features=features, gvd_mask=topo.gvd_mask,
-                    distance_field=distance_field(occ_map, cfg.occupied_thresh), config=cfg,
+                    features=features, gvd_mask=topo.gvd_mask, config=cfg,
                     map_checksum=occ_map.checksum(), version=FORMAT_VERSION,
                     edges=topo.edges, node_clearance=topo.node_clearance)
 
@@ -187,7 +175,6 @@ def save_index(index: MapIndex, path: str | Path) -> Path:
         'ranges': np.asarray(index.ranges, dtype=np.float64),
         'beam_angles': np.asarray(index.beam_angles, dtype=np.float64),
         'gvd_mask': np.asarray(index.gvd_mask, dtype=bool),
-        'distance_field': np.asarray(index.distance_field, dtype=np.float32),
     }
     per_node = [f.to_arrays() for f in index.features]
     names = [f.name for f in dataclasses.fields(ScanFeatures)]
@@ -261,7 +248,7 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None) -> Ma
             map=occ_map, node_xy=data['node_xy'], node_kind=data['node_kind'],
             node_sensor_pose=data['node_sensor_pose'], ranges=data['ranges'],
             beam_angles=data['beam_angles'], features=features, gvd_mask=data['gvd_mask'],
-            distance_field=data['distance_field'], config=config, map_checksum=checksum,
+            config=config, map_checksum=checksum,
             version=version, edges=data['edges'], node_clearance=data['node_clearance'])
     except KeyError as exc:
         raise ValueError(f'{path}: index file lacks array {exc}') from None
@@ -269,8 +256,7 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None) -> Ma
         raise ValueError(f'{path}: {exc}') from None
     shapes_ok = (index.node_kind.shape == (k,) and index.node_sensor_pose.shape == (k, 3)
                  and index.ranges.shape == (k, len(index.beam_angles))
-                 and index.gvd_mask.shape == occ_map.shape
-                 and index.distance_field.shape == occ_map.shape)
+                 and index.gvd_mask.shape == occ_map.shape)
     if not shapes_ok:
         raise ValueError(f'{path}: inconsistent array shapes (corrupt file)')
     return index

@@ -71,14 +71,6 @@ def test_features_are_the_virtual_scan_in_the_laser_frame(built):
         assert np.allclose(f.points, pts[f.source_index])
 
 
-def test_distance_field(built):
-    index, _ = built
-    df = index.distance_field
-    occ = index.map.occupied_mask()
-    assert df.shape == occ.shape and (df[occ] == 0).all()
-    assert df[50, 10] == pytest.approx(9 * RES, abs=1e-6)  # 9 cells from the left wall
-
-
 def test_progress_reports_increasing_fraction(built):
     _, calls = built
     done = [d for d, _, _ in calls]
@@ -93,7 +85,7 @@ def test_save_load_round_trip(built, tmp_path):
     assert isinstance(back, MapIndex)
     assert back.config == index.config
     for name in ('node_xy', 'node_kind', 'node_sensor_pose', 'ranges', 'beam_angles',
-                 'gvd_mask', 'distance_field', 'edges', 'node_clearance'):
+                 'gvd_mask', 'edges', 'node_clearance'):
         assert np.array_equal(getattr(back, name), getattr(index, name)), name
     assert np.array_equal(back.map.data, index.map.data) and back.map.origin == index.map.origin
     assert back.map_checksum == index.map_checksum

@@ -208,14 +208,14 @@ def run(args: argparse.Namespace) -> int:
         print(f'\n== Fig. 4: success % / matching rate % ({args.fig4_trials} trials per point)')
         sigmas = [0.0, 0.01, 0.02, 0.03, 0.04, 0.05]
         ratios = [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]
-        print(f'(a) 72 outliers, noise sigma mm: ' + ' '.join(f'{s * 1e3:>11.0f}' for s in sigmas))
+        print('(a) 72 outliers, noise sigma mm: ' + ' '.join(f'{s * 1e3:>11.0f}' for s in sigmas))
         for name, ref in refs.items():
             cells = []
             for sg in sigmas:
                 s = table2(ref, np.random.default_rng(args.seed + 1), cfg, args.fig4_trials, sg, 72)
                 cells.append(f'{s["success"]:5.0f}/{s["rate"]:5.1f}')
             print(f'{name:<32} ' + ' '.join(f'{c:>11}' for c in cells))
-        print(f'(b) sigma 5 mm, outliers/inliers: ' + ' '.join(f'{r:>11.1f}' for r in ratios))
+        print('(b) sigma 5 mm, outliers/inliers: ' + ' '.join(f'{r:>11.1f}' for r in ratios))
         for name, ref in refs.items():
             cells = []
             for r in ratios:
