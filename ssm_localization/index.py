@@ -24,7 +24,7 @@ from .progress import ProgressCallback
 from .raycast import RayCaster
 from .raycast import beam_angles as _beam_angles
 from .scan import ScanFeatures, prepare_scan
-from .topology import NODE_KIND_NAMES, NodeKind, TopologyConfig, build_topology
+from .topology import NODE_KIND_NAMES, NodeKind, TopologyConfig, build_topology, count_kinds
 from .transforms import compose
 
 #: Version of the ``.npz`` layout written by :func:`save_index`; other versions are refused.
@@ -105,9 +105,7 @@ class MapIndex:
         return len(self.node_xy)
 
     def kind_counts(self) -> dict[str, int]:
-        counts = np.bincount(np.asarray(self.node_kind, dtype=np.int64),
-                             minlength=len(NODE_KIND_NAMES))
-        return {name: int(counts[i]) for i, name in enumerate(NODE_KIND_NAMES)}
+        return count_kinds(self.node_kind)
 
 
 def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
@@ -272,7 +270,8 @@ def load_index_config(path: str | Path) -> IndexConfig:
     (dotted names allowed; keys that are not index parameters are left to the node), or a
     ``global_localizer`` params file with an ``index:`` section.
     """
-    from .params import from_dict, load_yaml_mapping, node_section, unflatten
+    from .params import (from_dict, laser_pose_of_section, load_yaml_mapping, node_section,
+                         unflatten)
     data = load_yaml_mapping(path)
     ros = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
     section = node_section(data, 'map_indexer') if ros else data
@@ -280,7 +279,7 @@ def load_index_config(path: str | Path) -> IndexConfig:
         section = node_section(data, 'global_localizer')
     if any('.' in str(key) for key in section):
         section = unflatten(section)
-    laser = [section.get(k) for k in ('laser_x', 'laser_y', 'laser_yaw')]
+    laser = laser_pose_of_section(section)
     if isinstance(section.get('index'), dict):
         section = section['index']
     idx_names = {f.name for f in dataclasses.fields(IndexConfig)}
@@ -298,8 +297,8 @@ def load_index_config(path: str | Path) -> IndexConfig:
             kwargs[key] = value  # from_dict names the unknown key
     if topo:
         kwargs['topology'] = topo
-    if any(v is not None for v in laser):   # the nodes' laser_x/y/yaw: the laser on the base
-        kwargs['sensor_pose'] = [float(v or 0.0) for v in laser]
+    if laser is not None:           # the nodes' laser_x/y/yaw: the laser on the base
+        kwargs['sensor_pose'] = list(laser)
     try:
         return from_dict(IndexConfig, kwargs)
     except ValueError as exc:

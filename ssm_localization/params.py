@@ -131,6 +131,14 @@ def _coerce(value: Any, default: Any, hint: Any, name: str) -> Any:
     return value
 
 
+def laser_pose_of_section(section: dict) -> tuple[float, float, float] | None:
+    """The nodes' ``laser_x/laser_y/laser_yaw`` parameters as a pose, None when none is set."""
+    values = [section.get(k) for k in ('laser_x', 'laser_y', 'laser_yaw')]
+    if all(v is None for v in values):
+        return None
+    return tuple(float(v or 0.0) for v in values)
+
+
 #: keys of a flat params file; a ROS params file may also hold the nodes' own parameters
 KNOWN_TOP_LEVEL = ('index', 'localizer', 'laser_x', 'laser_y', 'laser_yaw')
 
@@ -151,10 +159,8 @@ def load_configs(path: str | Path | None, node: str = 'global_localizer'):
                              'laser_x, laser_y, laser_yaw)')
         index_cfg = from_dict(IndexConfig, section.get('index'), 'index.')
         loc_cfg = from_dict(LocalizerConfig, section.get('localizer'), 'localizer.')
-        laser = [section.get(k) for k in ('laser_x', 'laser_y', 'laser_yaw')]
-        if any(v is not None for v in laser):
-            # the laser pose on the base (ROS parameters laser_x/y/yaw) feeds both configs
-            pose = tuple(float(v or 0.0) for v in laser)
+        pose = laser_pose_of_section(section)
+        if pose is not None:    # the laser pose on the base feeds both configs
             index_cfg = dataclasses.replace(index_cfg, sensor_pose=pose)
             loc_cfg = dataclasses.replace(loc_cfg, laser_pose=pose)
     except (TypeError, ValueError) as exc:

@@ -108,8 +108,13 @@ class Topology:
         return len(self.node_xy)
 
     def kind_counts(self) -> dict[str, int]:
-        counts = np.bincount(self.node_kind.astype(np.int64), minlength=len(NODE_KIND_NAMES))
-        return {name: int(counts[i]) for i, name in enumerate(NODE_KIND_NAMES)}
+        return count_kinds(self.node_kind)
+
+
+def count_kinds(node_kind: np.ndarray) -> dict[str, int]:
+    """``{kind name: number of nodes}`` for an array of :class:`NodeKind` values."""
+    counts = np.bincount(np.asarray(node_kind, dtype=np.int64), minlength=len(NODE_KIND_NAMES))
+    return {name: int(counts[i]) for i, name in enumerate(NODE_KIND_NAMES)}
 
 
 # --------------------------------------------------------------------------- 8-neighbourhoods
