@@ -42,9 +42,9 @@ def main(argv: list[str] | None = None) -> int:
 
     import numpy as np
 
-    from .carmen import read_carmen_log
-    from .matcher import match_scans
-    from .plotting import plot_match
+    from .io.carmen import read_carmen_log
+    from .matching.matcher import match_scans
+    from .evaluation.plotting import plot_match
     from .transforms import apply, compose, inverse, wrap_angle
 
     path = args.data / 'carmen' / 'intel-corrected.log.gz'

@@ -163,7 +163,7 @@ def synthetic_map(variant: int = 0):
     """A small 3-room map (10 m x 7 m at 0.05 m, frame ``map``); ``variant`` adds furniture."""
     import numpy as np
 
-    from ssm_localization.map_io import OccupancyMap
+    from ssm_localization.mapping.map_io import OccupancyMap
     res = 0.05
     data = np.zeros((140, 200), np.int8)
 

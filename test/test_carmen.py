@@ -4,9 +4,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssm_localization import carmen
-from ssm_localization.bags import read_bag
-from ssm_localization.map_io import load_map_yaml
+from ssm_localization.io import carmen
+from ssm_localization.io.bags import read_bag
+from ssm_localization.mapping.map_io import load_map_yaml
 from ssm_localization.transforms import compose, inverse
 
 DATA = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'carmen'

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssm_localization.index import (FORMAT_VERSION, IndexConfig, MapIndex, build_index,
+from ssm_localization.mapping.index import (FORMAT_VERSION, IndexConfig, MapIndex, build_index,
                                     load_index, load_index_config, save_index)
-from ssm_localization.map_io import OccupancyMap, load_map_yaml, save_map_yaml
-from ssm_localization.raycast import cast_rays
-from ssm_localization.topology import NodeKind, TopologyConfig
+from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml, save_map_yaml
+from ssm_localization.mapping.raycast import cast_rays
+from ssm_localization.mapping.topology import NodeKind, TopologyConfig
 
 MAPS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'maps'
 RES = 0.05

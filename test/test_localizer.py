@@ -6,15 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from ssm_localization.bags import read_bag
-from ssm_localization.index import IndexConfig, build_index
-from ssm_localization.localizer import (STATUSES, GlobalLocalizer, Localization, LocalizerConfig,
+from ssm_localization.io.bags import read_bag
+from ssm_localization.mapping.index import IndexConfig, build_index
+from ssm_localization.localization.localizer import (STATUSES, GlobalLocalizer, Localization, LocalizerConfig,
                                         vicinity_score)
-from ssm_localization.map_io import OccupancyMap
-from ssm_localization.matcher import spectral_score
-from ssm_localization.raycast import cast_rays
-from ssm_localization.scan import prepare_scan, ranges_to_points
-from ssm_localization.simulate import SimulationConfig, simulate
+from ssm_localization.mapping.map_io import OccupancyMap
+from ssm_localization.matching.matcher import spectral_score
+from ssm_localization.mapping.raycast import cast_rays
+from ssm_localization.matching.scan import prepare_scan, ranges_to_points
+from ssm_localization.io.simulate import SimulationConfig, simulate
 from ssm_localization.transforms import wrap_angle
 
 from conftest import BAGS

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from ssm_localization.map_io import (OccupancyMap, load_map_yaml, occupancy_map_from_msg,
+from ssm_localization.mapping.map_io import (OccupancyMap, load_map_yaml, occupancy_map_from_msg,
                                      save_map_yaml)
 
 SHARED = Path(__file__).resolve().parents[1].parent / 'shared' / 'data'

@@ -16,7 +16,7 @@ needs_carmen = pytest.mark.skipif(not (CARMEN / 'intel-corrected.log.gz').is_fil
 def test_plot_match_writes_png(tmp_path):
     pytest.importorskip('matplotlib')
     from ssm_localization import match_scans
-    from ssm_localization.plotting import plot_match
+    from ssm_localization.evaluation.plotting import plot_match
     ref = room_scan((0.0, 0.0, 0.0))
     truth = (0.2, -0.1, 0.3)
     new = apply(inverse(truth), ref)

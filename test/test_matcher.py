@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from scan_helpers import CARMEN, pose_error, room_scan
-from ssm_localization.matcher import (MatcherConfig, MatchResult, match_features, match_scans,
+from ssm_localization.matching.matcher import (MatcherConfig, MatchResult, match_features, match_scans,
                                       prepare_scan, spectral_score)
-from ssm_localization.ransac import (icp_point_to_line, procrustes, ransac_pose,
+from ssm_localization.matching.ransac import (icp_point_to_line, procrustes, ransac_pose,
                                      two_point_poses)
-from ssm_localization.scan import ranges_to_points
-from ssm_localization.spectral import binarize, leading_eigenvector, matching_score
+from ssm_localization.matching.scan import ranges_to_points
+from ssm_localization.matching.spectral import binarize, leading_eigenvector, matching_score
 from ssm_localization.transforms import apply, compose, inverse
 
 needs_carmen = pytest.mark.skipif(not (CARMEN / 'intel-corrected.log.gz').is_file(),
@@ -134,7 +134,7 @@ def test_spectral_score_prefers_the_same_place():
 @needs_carmen
 @pytest.mark.parametrize('name,k', [('intel', 300), ('freiburg-079', 1000)])
 def test_table2_protocol_on_real_scans(name, k):
-    from ssm_localization.carmen import read_carmen_log
+    from ssm_localization.io.carmen import read_carmen_log
     ref = read_carmen_log(CARMEN / f'{name}-corrected.log.gz').points(k)
     rng = np.random.default_rng(11)
     for _ in range(8):
@@ -146,7 +146,7 @@ def test_table2_protocol_on_real_scans(name, k):
 
 @needs_carmen
 def test_real_consecutive_pairs_freiburg():
-    from ssm_localization.carmen import read_carmen_log
+    from ssm_localization.io.carmen import read_carmen_log
     log = read_carmen_log(CARMEN / 'freiburg-079-corrected.log.gz')
     rng = np.random.default_rng(4)
     ok = 0

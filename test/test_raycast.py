@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from ssm_localization.raycast import beam_angles, cast_rays
+from ssm_localization.mapping.raycast import beam_angles, cast_rays
 
 RES = 0.05
 
@@ -136,7 +136,7 @@ def _brute_force(occ, res, origin, poses, angles, max_range):
 
 @pytest.mark.parametrize('seed', range(6))
 def test_random_grids_match_brute_force(seed):
-    from ssm_localization.raycast import RayCaster
+    from ssm_localization.mapping.raycast import RayCaster
     rng = np.random.default_rng(seed)
     h, w = rng.integers(15, 60, 2)
     occ = rng.random((h, w)) < (0.005, 0.02, 0.08)[seed % 3]

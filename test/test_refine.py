@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from ssm_localization.refine import BeamCheck, SurfaceModel, check_beams, refine_pose
-from ssm_localization.simulate import SimulationConfig, simulate
+from ssm_localization.localization.refine import BeamCheck, SurfaceModel, check_beams, refine_pose
+from ssm_localization.io.simulate import SimulationConfig, simulate
 from ssm_localization.transforms import rotation, wrap_angle
 
 from conftest import BAGS
@@ -115,7 +115,7 @@ def test_surface_model_without_occupied_cells_raises():
 
 @pytest.fixture(scope='module')
 def depot_clean():
-    from ssm_localization.bags import read_bag
+    from ssm_localization.io.bags import read_bag
     occ_map = read_bag(BAGS / 'depot_sim').map
     sim = simulate(occ_map, SimulationConfig(count=6, noise_sigma=0.0, seed=11))
     model = SurfaceModel.from_occupancy(occ_map.occupied_mask(), occ_map.resolution,
@@ -200,7 +200,7 @@ def test_check_beams_empty_and_nan_do_not_crash():
 
 def test_batched_refinement_equals_single(depot_clean):
     """refine_poses (several hypotheses at once) gives each pose what refine_pose gives it."""
-    from ssm_localization import refine
+    from ssm_localization.localization import refine
     if not hasattr(refine, 'refine_poses'):
         pytest.skip('no batched refine_poses in this version')
     _, sim, model = depot_clean

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from ssm_localization.bags import read_bag
-from ssm_localization.index import build_index
-from ssm_localization.localizer import GlobalLocalizer, Localization, LocalizerConfig
-from ssm_localization.replay import (ResultRow, match_truth, replay_scans, summarize,
+from ssm_localization.io.bags import read_bag
+from ssm_localization.mapping.index import build_index
+from ssm_localization.localization.localizer import GlobalLocalizer, Localization, LocalizerConfig
+from ssm_localization.evaluation.replay import (ResultRow, match_truth, replay_scans, summarize,
                                      write_results_csv)
 
 from conftest import find_bag

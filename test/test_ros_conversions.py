@@ -50,7 +50,7 @@ def test_scan_points_drop_invalid():
 
 
 def test_map_round_trip():
-    from ssm_localization.map_io import OccupancyMap, load_map_yaml
+    from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml
     occ = load_map_yaml(SHARED_MAPS / 'depot.yaml')
     grid = conv.occupancy_grid_from_map(occ, 3.5)
     assert (grid.info.width, grid.info.height) == (occ.width, occ.height)
@@ -91,7 +91,7 @@ def test_pose_with_covariance():
 
 
 def test_scan_record_to_laser_scan():
-    from ssm_localization.bags import ScanRecord
+    from ssm_localization.io.bags import ScanRecord
     rec = ScanRecord.from_ranges(1700000000.125, np.r_[1.0, np.inf, 2.5], -0.5, 0.25,
                                  range_min=0.1, range_max=20.0, frame_id='laser')
     msg = conv.laser_scan_from_record(rec)
@@ -103,7 +103,7 @@ def test_scan_record_to_laser_scan():
 
 
 def _fake_index():
-    from ssm_localization.map_io import OccupancyMap
+    from ssm_localization.mapping.map_io import OccupancyMap
     occ = OccupancyMap(np.zeros((100, 120), np.int8), 0.05)
     gvd = np.zeros((100, 120), bool)
     gvd[50, :] = True

@@ -40,7 +40,7 @@ def _has_nodes(arr: MarkerArray) -> bool:
 
 
 def _simulated(occ, count: int = 6, seed: int = 3):
-    from ssm_localization.simulate import SimulationConfig, simulate
+    from ssm_localization.io.simulate import SimulationConfig, simulate
     return simulate(occ, SimulationConfig(count=count, seed=seed, clearance=0.4,
                                           noise_sigma=0.005, stamp0=100.0))
 
@@ -99,7 +99,7 @@ class Localizer:
 # ---------------------------------------------------------------------------- map_indexer
 
 def test_map_indexer_markers_index_file_and_newest_map_wins(ros, tmp_path):
-    from ssm_localization.index import load_index
+    from ssm_localization.mapping.index import load_index
     from ssm_localization.ros.map_indexer import MapIndexerNode
     index_file = tmp_path / 'sub' / 'index.npz'
     node = ros.add(MapIndexerNode(context=ros.context,
@@ -135,7 +135,7 @@ def test_map_indexer_markers_index_file_and_newest_map_wins(ros, tmp_path):
 
 
 def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
-    import ssm_localization.index as index_mod
+    import ssm_localization.mapping.index as index_mod
     from ssm_localization.ros.map_indexer import MapIndexerNode
     real_build = index_mod.build_index
     started = []
@@ -163,7 +163,7 @@ def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
 
 
 def test_map_indexer_ignores_bad_maps(ros):
-    from ssm_localization.map_io import OccupancyMap
+    from ssm_localization.mapping.map_io import OccupancyMap
     from ssm_localization.ros.map_indexer import MapIndexerNode
     node = ros.add(MapIndexerNode(context=ros.context))
     pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
@@ -254,7 +254,7 @@ def test_localizer_service_bad_input_and_kidnapping(ros, capfd):
 
 def test_service_answers_while_indexing(ros, monkeypatch):
     """A relocalize call during indexing fails at once with 'indexing in progress'."""
-    import ssm_localization.index as index_mod
+    import ssm_localization.mapping.index as index_mod
     real_build = index_mod.build_index
 
     def slow_build(occ, config=None, progress=None):     # a big map, deterministically
@@ -275,7 +275,7 @@ def test_service_answers_while_indexing(ros, monkeypatch):
 
 
 def test_localizer_survives_bad_maps_and_reindexes_new_map(ros, capfd):
-    from ssm_localization.map_io import OccupancyMap
+    from ssm_localization.mapping.map_io import OccupancyMap
     occ = synthetic_map(0)
     sim = _simulated(occ, count=2, seed=11)
     loc = Localizer(ros, publish_initialpose=True, map_frame='world')
@@ -373,7 +373,7 @@ def test_continuous_mode_rate_limit(ros):
 @pytest.mark.parametrize('bag_name', ['depot_sim', 'intel_queries'])
 def test_localize_bag_scans_against_ground_truth(ros, bag_name):
     """Scans of a committed bag fed over ROS; published poses checked against /ground_truth."""
-    from ssm_localization.bags import read_bag
+    from ssm_localization.io.bags import read_bag
     data = read_bag(find_bag(bag_name))
     assert data.map is not None and data.ground_truth
     loc = Localizer(ros, scan_timeout=5.0)

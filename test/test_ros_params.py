@@ -96,7 +96,7 @@ def test_params_file_overrides_reach_the_core_configs(ros_domain, tmp_path):
 
 def test_ros_node_and_cli_read_the_same_file_alike(ros_domain):
     """``--params-file`` for the node and ``params.load_configs`` for the CLI agree."""
-    from ssm_localization.params import load_configs
+    from ssm_localization.config.params import load_configs
     from ssm_localization.ros.global_localizer import GlobalLocalizerNode
     index_cfg, loc_cfg = load_configs(PARAMS, 'global_localizer')
     ctx, node = _make(GlobalLocalizerNode, ['--ros-args', '--params-file', str(PARAMS)])

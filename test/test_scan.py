@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from scan_helpers import room_scan
-from ssm_localization.descriptors import candidates, shape_context
-from ssm_localization.matcher import MatcherConfig
-from ssm_localization.pairwise import (affinity_matrix, angle_table, deformation,
+from ssm_localization.matching.descriptors import candidates, shape_context
+from ssm_localization.matching.matcher import MatcherConfig
+from ssm_localization.matching.pairwise import (affinity_matrix, angle_table, deformation,
                                        distance_table, potential)
-from ssm_localization.scan import (ScanFeatures, downsample_even, local_normals, prepare_scan,
+from ssm_localization.matching.scan import (ScanFeatures, downsample_even, local_normals, prepare_scan,
                                    ranges_to_points, robust_tangents, sweep_direction, tangents)
 from ssm_localization.transforms import apply, rotation
 
@@ -149,7 +149,7 @@ def test_prepare_scan_drops_nan_and_maps_indices():
     assert f.descriptors.shape == (len(f), cfg.desc_radial_bins * cfg.desc_angular_bins)
     assert not f.is_degenerate
     with pytest.raises(ValueError, match='new_xy'):
-        from ssm_localization.scan import as_points
+        from ssm_localization.matching.scan import as_points
         as_points(np.ones((4, 3)), 'new_xy')
 
 

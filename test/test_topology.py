@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssm_localization.map_io import OccupancyMap, load_map_yaml
-from ssm_localization.topology import (NODE_KIND_NAMES, NodeKind, TopologyConfig,
+from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml
+from ssm_localization.mapping.topology import (NODE_KIND_NAMES, NodeKind, TopologyConfig,
                                        build_topology)
 
 MAPS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'maps'

@@ -30,7 +30,7 @@ def office_map(size: float = 100.0, resolution: float = 0.05, seed: int = 0):
     """
     import numpy as np
 
-    from ..map_io import OccupancyMap
+    from ..mapping.map_io import OccupancyMap
     rng = np.random.default_rng(seed)
     n = int(round(size / resolution))
     grid = np.zeros((n, n), dtype=np.int8)
@@ -98,7 +98,7 @@ def office_map(size: float = 100.0, resolution: float = 0.05, seed: int = 0):
 def _load(spec: str):
     if spec.startswith('office'):
         return office_map()
-    from ..map_io import load_map_yaml
+    from ..mapping.map_io import load_map_yaml
     return load_map_yaml(spec)
 
 
@@ -127,7 +127,7 @@ def _worker(spec: str) -> None:
     """Index one map in this process and print one JSON line."""
     import time
 
-    from ..index import build_index
+    from ..mapping.index import build_index
     occ_map = _load(spec)
     base = _rss_kb('VmRSS')
     _reset_peak()
@@ -161,8 +161,8 @@ def run(args: argparse.Namespace) -> int:
             specs.append((name, str(maps / f'{name}.yaml')))
     tmp = tempfile.TemporaryDirectory(prefix='ssm_bench_index_')
     if not args.no_carmen:  # built here, so the worker's peak is the index build alone
-        from ..carmen import build_map, read_carmen_log
-        from ..map_io import save_map_yaml
+        from ..io.carmen import build_map, read_carmen_log
+        from ..mapping.map_io import save_map_yaml
         for log in sorted((SHARED / 'carmen').glob('*.log.gz')):
             name = log.name.split('-corrected')[0]
             yaml_path = Path(tmp.name) / f'{name}.yaml'

@@ -57,15 +57,15 @@ def _data_dir(arg: str | None) -> Path:
 
 
 def _sim_queries(grid, n: int, seed: int, extra: dict):
-    from ..simulate import SimulationConfig, simulate
+    from ..io.simulate import SimulationConfig, simulate
     sim = simulate(grid, SimulationConfig(count=n, seed=seed, **extra))
     truth = {s.stamp: tuple(float(v) for v in p) for s, p in zip(sim.scans, sim.poses)}
     return sim.scans, truth
 
 
 def _real_queries(data: Path, work: Path, name: str, limit: int):
-    from ..carmen import build_map, log_scan_records, read_carmen_log
-    from ..map_io import load_map_yaml, save_map_yaml
+    from ..io.carmen import build_map, log_scan_records, read_carmen_log
+    from ..mapping.map_io import load_map_yaml, save_map_yaml
     log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
     map_yaml = work / f'{name}_even.yaml'
     if map_yaml.exists():
@@ -84,11 +84,11 @@ def _real_queries(data: Path, work: Path, name: str, limit: int):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..index import build_index
-    from ..localizer import GlobalLocalizer
-    from ..map_io import load_map_yaml
-    from ..params import load_configs
-    from ..replay import replay_scans, summarize
+    from ..mapping.index import build_index
+    from ..localization.localizer import GlobalLocalizer
+    from ..mapping.map_io import load_map_yaml
+    from ..config.params import load_configs
+    from ..evaluation.replay import replay_scans, summarize
 
     if args.quick:
         args.n, args.real_max = 60, 60
@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             print(line, flush=True)
             lines.append(line)
             if args.plot_dir and label == 'ssm':
-                from ..plotting import plot_replay
+                from ..evaluation.plotting import plot_replay
                 Path(args.plot_dir).mkdir(parents=True, exist_ok=True)
                 plot_replay(index, rows, Path(args.plot_dir) / f'{name}.png', title=name)
         print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)

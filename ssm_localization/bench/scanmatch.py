@@ -76,8 +76,8 @@ def synthetic_problem(ref: np.ndarray, rng, sigma: float, n_out: int):
 
 
 def run_trial(ref_xy, new_xy, truth, outlier, config) -> Trial:
-    from ..descriptors import candidates
-    from ..matcher import match_features, prepare_scan
+    from ..matching.descriptors import candidates
+    from ..matching.matcher import match_features, prepare_scan
     from ..transforms import apply, wrap_angle
     t0, c0 = time.perf_counter(), time.process_time()
     rf = prepare_scan(ref_xy, config)
@@ -175,8 +175,8 @@ T2_HEAD = (f'{"":<24} {"x mu":>7} {"x sd":>6} {"y mu":>7} {"y sd":>6} {"th mu":>
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..carmen import read_carmen_log
-    from ..matcher import HAND_WEIGHTS, MatcherConfig
+    from ..io.carmen import read_carmen_log
+    from ..matching.matcher import HAND_WEIGHTS, MatcherConfig
     if args.quick:
         args.trials, args.fig4_trials, args.pairs, args.ablation_trials = 60, 8, 30, 30
     data = _data_dir(args) / 'carmen'

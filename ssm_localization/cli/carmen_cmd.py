@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _convert(args, bar):
-    from ..carmen import MapBuildConfig, convert_carmen
+    from ..io.carmen import MapBuildConfig, convert_carmen
     return convert_carmen(args.log, args.out, name=args.name, map_scans=args.map_scans,
                           query_scans=args.query_scans, every=args.every,
                           max_scans=args.max_scans, first=args.first, last=args.last,

@@ -16,8 +16,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from ..index import build_index, load_index_config, save_index
-    from ..map_io import load_map_yaml
+    from ..mapping.index import build_index, load_index_config, save_index
+    from ..mapping.map_io import load_map_yaml
     from ..progress import ProgressBar
 
     config = load_index_config(args.params) if args.params else None
@@ -32,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
           f'map {occ_map.width} x {occ_map.height} cells @ {occ_map.resolution:g} m; '
           f'wrote {path}')
     if args.plot:
-        from ..plotting import plot_index
+        from ..evaluation.plotting import plot_index
         plot_index(index, args.plot, title=f'{args.map}: {len(index)} nodes')
         print(f'wrote {args.plot}')
     return 0

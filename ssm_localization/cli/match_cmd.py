@@ -24,8 +24,8 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from ..carmen import read_carmen_log
-    from ..matcher import MatcherConfig, match_scans
+    from ..io.carmen import read_carmen_log
+    from ..matching.matcher import MatcherConfig, match_scans
     from ..transforms import apply, compose, inverse, wrap_angle
 
     log = read_carmen_log(args.log)
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     print(f'pairs {len(res.pairs)}, inliers {len(res.inliers)}, score {res.score:.1f}, '
           f'overlap {res.overlap:.2f}, {ms:.1f} ms')
     if args.plot:
-        from ..plotting import plot_match
+        from ..evaluation.plotting import plot_match
         out = plot_match(ref, new, res.pose, args.plot, pairs=res.inliers, truth=truth,
                          title=f'{log.name} scan {args.k} vs {j}: error '
                                f'{np.hypot(err[0], err[1]) * 1e3:.0f} mm / '

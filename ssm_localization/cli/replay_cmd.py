@@ -20,13 +20,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from ..bags import read_bag
-    from ..index import build_index, load_index
-    from ..localizer import GlobalLocalizer
-    from ..map_io import load_map_yaml
-    from ..params import load_configs
+    from ..io.bags import read_bag
+    from ..mapping.index import build_index, load_index
+    from ..localization.localizer import GlobalLocalizer
+    from ..mapping.map_io import load_map_yaml
+    from ..config.params import load_configs
     from ..progress import ProgressBar
-    from ..replay import replay_scans, summarize, write_results_csv
+    from ..evaluation.replay import replay_scans, summarize, write_results_csv
 
     index_cfg, loc_cfg = load_configs(args.params)
     bag = read_bag(args.bag, scan_topic=args.scan_topic)
@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     if any(r.has_truth for r in rows):
         print(summarize(rows).format('replay'))
     if args.plot:
-        from ..plotting import plot_replay
+        from ..evaluation.plotting import plot_replay
         plot_replay(index, rows, args.plot)
         print(f'wrote {args.plot}')
     return 0

@@ -28,9 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..map_io import load_map_yaml
+    from ..mapping.map_io import load_map_yaml
     from ..progress import ProgressBar
-    from ..simulate import SimulationConfig, simulate_bag
+    from ..io.simulate import SimulationConfig, simulate_bag
 
     cfg = SimulationConfig(count=args.count, beams=args.beams, fov_deg=args.fov,
                            max_range=args.max_range, noise_sigma=args.noise,

@@ -105,7 +105,7 @@ def stamp_to_sec(stamp: Any) -> float:
 
 def occupancy_map_from_msg(msg: OccupancyGrid):
     """OccupancyGrid -> OccupancyMap (delegates to ``map_io``; raises ValueError when malformed)."""
-    from ssm_localization import map_io
+    from ssm_localization.mapping import map_io
     return map_io.occupancy_map_from_msg(msg)
 
 

@@ -62,7 +62,7 @@ NODE_PARAMS: dict[str, tuple[Any, str]] = {
 
 def localizer_parameters() -> dict[str, tuple[Any, str]]:
     """Every global_localizer parameter: ``{name: (default, description)}``."""
-    from ssm_localization.localizer import LocalizerConfig
+    from ssm_localization.localization.localizer import LocalizerConfig
     index_params = {k: v for k, v in indexer_parameters().items() if k.startswith('index.')}
     return {**NODE_PARAMS, **LASER_PARAMS, **MAP_PARAMS, **index_params,
             **config_parameter_table('localizer', LocalizerConfig())}
@@ -124,8 +124,8 @@ class GlobalLocalizerNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('global_localizer', **kwargs)
-        from ssm_localization.index import IndexConfig
-        from ssm_localization.localizer import LocalizerConfig
+        from ssm_localization.mapping.index import IndexConfig
+        from ssm_localization.localization.localizer import LocalizerConfig
         values = declare_table(self, localizer_parameters(), dynamic=DYNAMIC)
         self.mode = str(values['mode'])
         if self.mode not in MODES:
@@ -190,7 +190,7 @@ class GlobalLocalizerNode(Node):
 
     # ------------------------------------------------------------------ index
     def _make_localizer(self, index):
-        from ssm_localization.localizer import GlobalLocalizer
+        from ssm_localization.localization.localizer import GlobalLocalizer
         localizer = GlobalLocalizer(index, self.localizer_config)
         frame = getattr(index.map, 'frame_id', '') or 'map'
         marks = markers.index_markers(index, self.map_frame_param or frame, 0,
@@ -198,7 +198,7 @@ class GlobalLocalizerNode(Node):
         return localizer, marks
 
     def _load_job(self, path: Path):
-        from ssm_localization.index import load_index
+        from ssm_localization.mapping.index import load_index
         index = load_index(path)
         sensor = tuple(getattr(index.config, 'sensor_pose', self.laser_pose))
         if any(abs(a - b) > 1e-6 for a, b in zip(sensor, self.laser_pose)):
@@ -208,7 +208,7 @@ class GlobalLocalizerNode(Node):
         return (index, *self._make_localizer(index))
 
     def _build_job(self, occ, progress):
-        from ssm_localization.index import build_index
+        from ssm_localization.mapping.index import build_index
         index = build_index(occ, self.index_config, progress=progress)
         return (index, *self._make_localizer(index))
 
@@ -237,7 +237,7 @@ class GlobalLocalizerNode(Node):
             self.marker_pub.publish(markers.marker_array(marks, frame,
                                                          self.get_clock().now().nanoseconds))
         if self._save_to is not None:
-            from ssm_localization.index import save_index
+            from ssm_localization.mapping.index import save_index
             try:
                 self._save_to.parent.mkdir(parents=True, exist_ok=True)
                 save_index(index, self._save_to)

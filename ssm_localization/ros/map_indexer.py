@@ -28,7 +28,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from visualization_msgs.msg import MarkerArray
 
-from ssm_localization import params as ssm_params
+from ssm_localization.config import params as ssm_params
 from ssm_localization.ros import markers
 from ssm_localization.ros.conversions import occupancy_map_from_msg
 
@@ -192,7 +192,7 @@ MAP_PARAMS: dict[str, tuple[Any, str]] = {
 
 def indexer_parameters() -> dict[str, tuple[Any, str]]:
     """Every map_indexer parameter: ``{name: (default, description)}``."""
-    from ssm_localization.index import IndexConfig
+    from ssm_localization.mapping.index import IndexConfig
     return {'index_file': ('', 'write the index here (npz) after each build; empty = do not '
                                'write'),
             **LASER_PARAMS, **MAP_PARAMS, **config_parameter_table('index', IndexConfig())}
@@ -320,7 +320,7 @@ class MapIndexerNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('map_indexer', **kwargs)
-        from ssm_localization.index import IndexConfig
+        from ssm_localization.mapping.index import IndexConfig
         values = declare_table(self, indexer_parameters())
         self.laser_pose = laser_pose_of(values)
         self.index_config = build_config(IndexConfig, 'index', values, self.laser_pose)
@@ -341,7 +341,7 @@ class MapIndexerNode(Node):
             return
         label = f'map {occ.width}x{occ.height} @ {occ.resolution:g} m ({occ.checksum()[:8]})'
         self.get_logger().info(f'{label}: indexing')
-        from ssm_localization.index import build_index
+        from ssm_localization.mapping.index import build_index
         cfg = self.index_config
         self.builder.submit(label, lambda progress: build_index(occ, cfg, progress=progress))
 
@@ -354,7 +354,7 @@ class MapIndexerNode(Node):
         self.marker_pub.publish(markers.marker_array(
             markers.index_markers(index, frame, stamp, self.max_gvd_points), frame, stamp))
         if self.index_file:
-            from ssm_localization.index import save_index
+            from ssm_localization.mapping.index import save_index
             path = Path(self.index_file).expanduser()
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)

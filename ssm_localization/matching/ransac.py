@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from .transforms import compose, inverse
+from ..transforms import compose, inverse
 
 
 def two_point_poses(ref_a, new_a, ref_b, new_b) -> np.ndarray:

@@ -145,8 +145,8 @@ KNOWN_TOP_LEVEL = ('index', 'localizer', 'laser_x', 'laser_y', 'laser_yaw')
 
 def load_configs(path: str | Path | None, node: str = 'global_localizer'):
     """``(IndexConfig, LocalizerConfig)`` from a params file (defaults where absent)."""
-    from .index import IndexConfig
-    from .localizer import LocalizerConfig
+    from ..mapping.index import IndexConfig
+    from ..localization.localizer import LocalizerConfig
     data = load_yaml_mapping(path) if path else {}
     ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
     section = node_section(data, node)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .transforms import quaternion_to_yaw
+from ..transforms import quaternion_to_yaw
 
 MODES = ('trinary', 'scale', 'raw')
 

@@ -57,7 +57,7 @@ def plot_replay(index, rows, path, title: str = '') -> None:
 def plot_index(index, path, title: str = '', show_ids: bool = True) -> None:
     """Map, GVD and topological nodes (colored by kind, with their ids) of a ``MapIndex``."""
     import numpy as np
-    from .topology import NODE_KIND_NAMES
+    from ..mapping.topology import NODE_KIND_NAMES
     plt, fig, ax, extent = _map_figure(index.map, 10, 0.8)
     h, w = index.map.data.shape
     gvd = np.ma.masked_where(~np.asarray(index.gvd_mask, dtype=bool), np.ones((h, w)))
@@ -97,7 +97,7 @@ def plot_match(ref_xy, new_xy, pose, out, pairs=None, truth=None, title: str = '
     import numpy as np
     from pathlib import Path
 
-    from .transforms import apply
+    from ..transforms import apply
     plt = _pyplot()
     ref = np.asarray(ref_xy, float).reshape(-1, 2)
     new = np.asarray(new_xy, float).reshape(-1, 2)

@@ -22,13 +22,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .descriptors import descriptor_distances
-from .index import MapIndex
-from .matcher import match_features, spectral_score, spectral_solution
-from .raycast import RayCaster
+from ..matching.descriptors import descriptor_distances
+from ..mapping.index import MapIndex
+from ..matching.matcher import match_features, spectral_score, spectral_solution
+from ..mapping.raycast import RayCaster
 from .refine import BeamCheck, SurfaceModel, check_beams, refine_poses
-from .scan import prepare_scan, ranges_to_points
-from .transforms import Pose2, apply, compose, inverse, wrap_angle
+from ..matching.scan import prepare_scan, ranges_to_points
+from ..transforms import Pose2, apply, compose, inverse, wrap_angle
 
 STATUSES = ('ok', 'ambiguous', 'failed')
 

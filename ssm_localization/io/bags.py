@@ -19,11 +19,11 @@ from typing import TYPE_CHECKING, Iterable, Iterator, Mapping
 
 import numpy as np
 
-from .progress import ProgressCallback
-from .transforms import Pose2, quaternion_to_yaw, yaw_to_quaternion
+from ..progress import ProgressCallback
+from ..transforms import Pose2, quaternion_to_yaw, yaw_to_quaternion
 
 if TYPE_CHECKING:  # map_io is imported lazily (only needed when a bag holds /map)
-    from .map_io import OccupancyMap
+    from ..mapping.map_io import OccupancyMap
 
 SCAN_TOPIC = '/scan'
 MAP_TOPIC = '/map'
@@ -377,7 +377,7 @@ def _scan_record(msg) -> ScanRecord:
 def _map_from_msg(msg) -> 'OccupancyMap':
     """OccupancyGrid -> OccupancyMap; the float32 resolution is restored to its shortest decimal
     (0.05, not 0.0500000007) so the map equals (and checksums like) the YAML it was made from."""
-    from .map_io import OccupancyMap, occupancy_map_from_msg
+    from ..mapping.map_io import OccupancyMap, occupancy_map_from_msg
     m = occupancy_map_from_msg(msg)
     res = float(repr(np.float32(m.resolution)).removeprefix('np.float32(').rstrip(')'))
     return OccupancyMap(m.data, res, m.origin, m.frame_id)

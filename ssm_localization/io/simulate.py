@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .map_io import OccupancyMap
-from .progress import ProgressCallback
-from .transforms import compose
+from ..mapping.map_io import OccupancyMap
+from ..progress import ProgressCallback
+from ..transforms import compose
 
 
 @dataclass(frozen=True)
@@ -112,7 +112,7 @@ def simulate(occ_map: OccupancyMap, config: SimulationConfig | None = None,
              progress: ProgressCallback | None = None) -> Simulation:
     """Simulate ``config.count`` scans at random poses of ``occ_map`` (see SimulationConfig)."""
     from .bags import ScanRecord
-    from .raycast import cast_rays
+    from ..mapping.raycast import cast_rays
 
     cfg = config or SimulationConfig()
     cfg.validate()

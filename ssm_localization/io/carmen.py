@@ -17,11 +17,11 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from .progress import ProgressCallback
-from .transforms import compose, inverse
+from ..progress import ProgressCallback
+from ..transforms import compose, inverse
 
 if TYPE_CHECKING:
-    from .map_io import OccupancyMap
+    from ..mapping.map_io import OccupancyMap
 
 #: no-return readings of the shared logs (the sensor maximum), by file-name prefix
 NO_RETURN = {'intel': 81.83, 'aces': 50.0, 'freiburg-079': 81.91}
@@ -264,7 +264,7 @@ def build_map(log: CarmenLog, indices: Sequence[int] | None = None,
               config: MapBuildConfig | None = None, beam_angles: np.ndarray | None = None,
               progress: ProgressCallback | None = None) -> 'OccupancyMap':
     """Occupancy map of ``log`` from the scans ``indices`` (default: the even ones)."""
-    from .map_io import OccupancyMap
+    from ..mapping.map_io import OccupancyMap
     idx = select_scans(len(log), 'even') if indices is None else np.asarray(indices, dtype=int)
     if idx.size == 0:
         raise ValueError(f'{log.name}: no scans selected for the map')
@@ -280,7 +280,7 @@ def endpoint_fit(occ_map: 'OccupancyMap', log: CarmenLog, indices: Sequence[int]
     at their corrected poses, to the nearest occupied cell centre of ``occ_map``."""
     from scipy.ndimage import distance_transform_edt
 
-    from .transforms import apply
+    from ..transforms import apply
     occ = np.asarray(occ_map.data) >= 65
     if not occ.any():
         raise ValueError('map has no occupied cells')
@@ -364,7 +364,7 @@ def convert_carmen(log_path: str | Path, out_dir: str | Path, name: str | None =
     ``OUT/NAME_queries/`` (the ``query_scans`` scans, every ``every``-th, at most ``max_scans``).
     ``first``/``last`` restrict both to the scan index range ``[first, last)``; ``bag_path``
     overrides the bag's location."""
-    from .map_io import save_map_yaml
+    from ..mapping.map_io import save_map_yaml
     log = read_carmen_log(log_path)
     name = name or log.name
     out_dir = Path(out_dir)

@@ -38,7 +38,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from .map_io import OccupancyMap
-from .progress import ProgressCallback
+from ..progress import ProgressCallback
 
 
 class NodeKind(IntEnum):

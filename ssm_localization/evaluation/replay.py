@@ -9,9 +9,9 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .localizer import GlobalLocalizer, Localization
-from .progress import ProgressBar
-from .transforms import Pose2, wrap_angle
+from ..localization.localizer import GlobalLocalizer, Localization
+from ..progress import ProgressBar
+from ..transforms import Pose2, wrap_angle
 
 #: success: status ok and within these bounds of the ground truth (the issue's definition)
 SUCCESS_XY = 0.5

@@ -19,13 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from .map_io import OccupancyMap
-from .matcher import MatcherConfig
-from .progress import ProgressCallback
+from ..matching.matcher import MatcherConfig
+from ..progress import ProgressCallback
 from .raycast import RayCaster
 from .raycast import beam_angles as _beam_angles
-from .scan import ScanFeatures, prepare_scan
+from ..matching.scan import ScanFeatures, prepare_scan
 from .topology import NODE_KIND_NAMES, NodeKind, TopologyConfig, build_topology, count_kinds
-from .transforms import compose
+from ..transforms import compose
 
 #: Version of the ``.npz`` layout written by :func:`save_index`; other versions are refused.
 FORMAT_VERSION = 1
@@ -65,12 +65,12 @@ class IndexConfig:
                              f'{self.occupied_thresh!r}')
 
     def to_json(self) -> str:
-        from .params import flatten
+        from ..config.params import flatten
         return json.dumps(flatten(self), sort_keys=True)
 
     @classmethod
     def from_json(cls, text: str) -> 'IndexConfig':
-        from .params import from_dict, unflatten
+        from ..config.params import from_dict, unflatten
         return from_dict(cls, unflatten(json.loads(text)))
 
 
@@ -270,7 +270,7 @@ def load_index_config(path: str | Path) -> IndexConfig:
     (dotted names allowed; keys that are not index parameters are left to the node), or a
     ``global_localizer`` params file with an ``index:`` section.
     """
-    from .params import (from_dict, laser_pose_of_section, load_yaml_mapping, node_section,
+    from ..config.params import (from_dict, laser_pose_of_section, load_yaml_mapping, node_section,
                          unflatten)
     data = load_yaml_mapping(path)
     ros = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())

@@ -1,0 +1,1 @@
+"""Offline evaluation: replay against ground truth, RESULTS.csv, figures."""

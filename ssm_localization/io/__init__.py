@@ -1,0 +1,1 @@
+"""Data in and out: rosbag2 bags, CARMEN logs, simulated scans."""

@@ -1,0 +1,1 @@
+"""Global localization on an indexed map (paper section IV): localizer, refinement, verification."""

@@ -1,0 +1,1 @@
+"""Maps and their topological index (paper section III): map files, GVD topology, ray casting, index."""

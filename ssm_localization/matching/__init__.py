@@ -1,0 +1,1 @@
+"""Spectral scan matching (paper section II): scan geometry, descriptors, affinity, eigenvector, RANSAC."""
