@@ -44,8 +44,8 @@ sys.path.insert(0, str(ROOT))
 from ssm_localization.bench.scanmatch import random_pose, synthetic_problem  # noqa: E402
 from ssm_localization.io.carmen import read_carmen_log  # noqa: E402
 from ssm_localization.matching.descriptors import candidates  # noqa: E402
-from ssm_localization.matching.matcher import MatcherConfig  # noqa: E402
-from ssm_localization.matching.scan import prepare_scan  # noqa: E402
+from ssm_localization.config import MatcherConfig  # noqa: E402
+from ssm_localization.matching.features import prepare_scan  # noqa: E402
 from ssm_localization.transforms import apply, compose, inverse  # noqa: E402
 
 CORRECT_TOL = 0.1

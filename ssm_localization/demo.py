@@ -15,6 +15,14 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
+from .cli import main as cli_main
+from .evaluation.plotting import plot_match
+from .io.carmen import read_carmen_log
+from .matching.matcher import match_scans
+from .transforms import apply, compose, inverse, wrap_angle
+
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = REPO.parent / 'shared' / 'data'
 DEFAULT_BAG = REPO / 'bags' / 'intel_queries'
@@ -22,7 +30,6 @@ DEFAULT_BAG = REPO / 'bags' / 'intel_queries'
 
 def replay_demo(bag: Path, out: Path) -> int:
     """Localize every scan of ``bag``; print the figures; write the CSV and the plot."""
-    from .cli import main as cli_main
     print(f'Single-scan global localization of every scan in {bag.name} (real Intel scans)')
     return cli_main(['replay', str(bag), '-o', str(out / 'intel_results.csv'),
                      '--plot', str(out / 'intel_replay.png')])
@@ -39,13 +46,6 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     status = replay_demo(args.bag, args.out)
     print()
-
-    import numpy as np
-
-    from .io.carmen import read_carmen_log
-    from .matching.matcher import match_scans
-    from .evaluation.plotting import plot_match
-    from .transforms import apply, compose, inverse, wrap_angle
 
     path = args.data / 'carmen' / 'intel-corrected.log.gz'
     if not path.is_file():

@@ -1,4 +1,4 @@
-"""bags.py: rosbag2/mcap round trip, bare .mcap files, damaged bags, missing topics."""
+"""io/bag_reader.py, io/bag_writer.py: rosbag2/mcap round trip, bare .mcap files, damaged bags, missing topics."""
 import math
 import shutil
 import warnings
@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssm_localization.io.bags import (BagError, ScanRecord, bag_topics, iter_scans, read_bag,
-                                   write_bag)
-from ssm_localization.mapping.map_io import OccupancyMap
+from ssm_localization import (BagError, OccupancyMap, ScanRecord, iter_scans, load_map_yaml,
+                              read_bag, write_bag)
+from ssm_localization.io.bag_reader import bag_topics
 
 
 def _map():
@@ -206,7 +206,6 @@ def test_committed_bags(name):
     if name == 'intel_queries':
         assert len(data.scans[0].ranges) == 180 and np.isinf(np.concatenate(
             [s.ranges for s in data.scans])).any()
-        from ssm_localization.mapping.map_io import load_map_yaml
         assert data.map.checksum() == load_map_yaml(REPO / 'maps' / 'intel.yaml').checksum()
     if name.startswith('depot'):
         fov = data.scans[0].angle_max - data.scans[0].angle_min
@@ -216,7 +215,6 @@ def test_committed_bags(name):
 
 @pytest.mark.parametrize('name', ['intel', 'aces', 'freiburg-079'])
 def test_committed_maps(name):
-    from ssm_localization.mapping.map_io import load_map_yaml
     occ_map = load_map_yaml(REPO / 'maps' / f'{name}.yaml')
     assert occ_map.resolution == 0.05 and max(occ_map.shape) < 1300
     assert occ_map.occupied_mask().sum() > 5000 and occ_map.free_mask().sum() > 50000

@@ -4,9 +4,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ssm_localization import MapBuildConfig, load_map_yaml, read_bag
 from ssm_localization.io import carmen
-from ssm_localization.io.bags import read_bag
-from ssm_localization.mapping.map_io import load_map_yaml
+from ssm_localization.mapping.grid import build_occupancy_grid
 from ssm_localization.transforms import compose, inverse
 
 DATA = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'carmen'
@@ -77,8 +77,8 @@ def test_grid_of_a_synthetic_room():
     angles = np.linspace(-np.pi, np.pi, 720, endpoint=False)
     c, s = np.abs(np.cos(angles)), np.abs(np.sin(angles))
     ranges = 2.0 / np.maximum(c, s)
-    data, origin = carmen.build_occupancy_grid(ranges[None], np.zeros((1, 3)), angles,
-                                               carmen.MapBuildConfig(resolution=0.1, margin=0.5))
+    data, origin = build_occupancy_grid(ranges[None], np.zeros((1, 3)), angles,
+                                               MapBuildConfig(resolution=0.1, margin=0.5))
     assert origin[0] == pytest.approx(-2.5) and data.shape == (50, 50)
     assert data[25, 25] == 0 and data[25, 5] == 100 and data[5, 25] == 100
     assert data[0, 0] == -1

@@ -7,9 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from ssm_localization.io.bags import read_bag, write_bag
+from ssm_localization import read_bag, save_map_yaml, write_bag
 from ssm_localization.cli import main
-from ssm_localization.mapping.map_io import save_map_yaml
 
 from conftest import find_bag
 

@@ -9,11 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssm_localization.mapping.index import (FORMAT_VERSION, IndexConfig, MapIndex, build_index,
-                                    load_index, load_index_config, save_index)
-from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml, save_map_yaml
+from ssm_localization import (IndexConfig, MapIndex, OccupancyMap, TopologyConfig, build_index,
+                              load_index, load_index_config, load_map_yaml, save_index,
+                              save_map_yaml)
+from ssm_localization.config import config_from_json, config_to_json
+from ssm_localization.mapping.index import FORMAT_VERSION
 from ssm_localization.mapping.raycast import cast_rays
-from ssm_localization.mapping.topology import NodeKind, TopologyConfig
+from ssm_localization.mapping.topology import NodeKind
 
 MAPS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'maps'
 RES = 0.05
@@ -172,7 +174,7 @@ def test_config_validation():
         IndexConfig(beams=0)
     with pytest.raises(ValueError, match='max_range'):
         IndexConfig(max_range=-1.0)
-    assert IndexConfig.from_json(IndexConfig().to_json()) == IndexConfig()
+    assert config_from_json(IndexConfig, config_to_json(IndexConfig())) == IndexConfig()
 
 
 def test_load_index_config_flat_nested_and_ros(tmp_path):

@@ -6,15 +6,14 @@ import math
 import numpy as np
 import pytest
 
-from ssm_localization.io.bags import read_bag
-from ssm_localization.mapping.index import IndexConfig, build_index
-from ssm_localization.localization.localizer import (STATUSES, GlobalLocalizer, Localization, LocalizerConfig,
+from ssm_localization import (GlobalLocalizer, IndexConfig, Localization, LocalizerConfig,
+                              SimulationConfig, build_index, prepare_scan, read_bag, simulate)
+from ssm_localization.localization.localizer import (STATUSES,
                                         vicinity_score)
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.matching.matcher import spectral_score
 from ssm_localization.mapping.raycast import cast_rays
-from ssm_localization.matching.scan import prepare_scan, ranges_to_points
-from ssm_localization.io.simulate import SimulationConfig, simulate
+from ssm_localization.matching.scan import ranges_to_points
 from ssm_localization.transforms import wrap_angle
 
 from conftest import BAGS

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from scan_helpers import CARMEN, pose_error, room_scan
-from ssm_localization.matching.matcher import (MatcherConfig, MatchResult, match_features, match_scans,
-                                      prepare_scan, spectral_score)
+from ssm_localization import (MatcherConfig, MatchResult, match_features, match_scans,
+                              prepare_scan)
+from ssm_localization.matching.matcher import spectral_score
 from ssm_localization.matching.ransac import (icp_point_to_line, procrustes, ransac_pose,
                                      two_point_poses)
 from ssm_localization.matching.scan import ranges_to_points

@@ -8,10 +8,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ssm_localization.mapping.index import IndexConfig
-from ssm_localization.localization.localizer import LocalizerConfig
-from ssm_localization.matching.matcher import MatcherConfig
-from ssm_localization.config.params import flatten, from_dict, load_configs, unflatten
+from ssm_localization.config import (IndexConfig, LocalizerConfig, MatcherConfig, flatten,
+                                     from_dict, load_configs, unflatten)
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from ssm_localization.localization.refine import BeamCheck, SurfaceModel, check_beams, refine_pose
-from ssm_localization.io.simulate import SimulationConfig, simulate
+from ssm_localization import SimulationConfig, simulate
+from ssm_localization.localization.refine import SurfaceModel, refine_pose
+from ssm_localization.localization.verify import BeamCheck, check_beams
 from ssm_localization.transforms import rotation, wrap_angle
 
 from conftest import BAGS
@@ -115,7 +116,7 @@ def test_surface_model_without_occupied_cells_raises():
 
 @pytest.fixture(scope='module')
 def depot_clean():
-    from ssm_localization.io.bags import read_bag
+    from ssm_localization import read_bag
     occ_map = read_bag(BAGS / 'depot_sim').map
     sim = simulate(occ_map, SimulationConfig(count=6, noise_sigma=0.0, seed=11))
     model = SurfaceModel.from_occupancy(occ_map.occupied_mask(), occ_map.resolution,

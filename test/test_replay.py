@@ -7,9 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from ssm_localization.io.bags import read_bag
-from ssm_localization.mapping.index import build_index
-from ssm_localization.localization.localizer import GlobalLocalizer, Localization, LocalizerConfig
+from ssm_localization import (GlobalLocalizer, Localization, LocalizerConfig, build_index,
+                              read_bag)
 from ssm_localization.evaluation.replay import (ResultRow, match_truth, replay_scans, summarize,
                                      write_results_csv)
 

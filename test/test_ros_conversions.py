@@ -91,7 +91,7 @@ def test_pose_with_covariance():
 
 
 def test_scan_record_to_laser_scan():
-    from ssm_localization.io.bags import ScanRecord
+    from ssm_localization import ScanRecord
     rec = ScanRecord.from_ranges(1700000000.125, np.r_[1.0, np.inf, 2.5], -0.5, 0.25,
                                  range_min=0.1, range_max=20.0, frame_id='laser')
     msg = conv.laser_scan_from_record(rec)

@@ -71,7 +71,7 @@ def _relocalize(ros, client, timeout: float = 60.0):
 
 
 def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
-    from ssm_localization.io.bags import read_bag
+    from ssm_localization import read_bag
     bag = find_bag('depot_sim')
     data = read_bag(bag)
     assert PARAMS.exists()
@@ -127,8 +127,7 @@ def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
 def test_map_indexer_process_writes_index_that_global_localizer_loads(ros, tmp_path):
     """map_indexer indexes the bag's map into a file; global_localizer starts from that file
     (no map topic needed) and relocalizes a scan played from the bag."""
-    from ssm_localization.io.bags import read_bag
-    from ssm_localization.mapping.index import load_index
+    from ssm_localization import load_index, read_bag
     bag = find_bag('depot_sim')
     data = read_bag(bag)
     index_file = tmp_path / 'depot_index.npz'

@@ -40,7 +40,7 @@ def _has_nodes(arr: MarkerArray) -> bool:
 
 
 def _simulated(occ, count: int = 6, seed: int = 3):
-    from ssm_localization.io.simulate import SimulationConfig, simulate
+    from ssm_localization import SimulationConfig, simulate
     return simulate(occ, SimulationConfig(count=count, seed=seed, clearance=0.4,
                                           noise_sigma=0.005, stamp0=100.0))
 
@@ -373,7 +373,7 @@ def test_continuous_mode_rate_limit(ros):
 @pytest.mark.parametrize('bag_name', ['depot_sim', 'intel_queries'])
 def test_localize_bag_scans_against_ground_truth(ros, bag_name):
     """Scans of a committed bag fed over ROS; published poses checked against /ground_truth."""
-    from ssm_localization.io.bags import read_bag
+    from ssm_localization import read_bag
     data = read_bag(find_bag(bag_name))
     assert data.map is not None and data.ground_truth
     loc = Localizer(ros, scan_timeout=5.0)

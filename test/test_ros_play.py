@@ -25,7 +25,7 @@ pytestmark = pytest.mark.ros
 
 @pytest.fixture(scope='module')
 def intel():
-    from ssm_localization.io.bags import read_bag
+    from ssm_localization import read_bag
     return read_bag(find_bag('intel_queries'))
 
 

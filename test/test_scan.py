@@ -1,4 +1,4 @@
-"""Scan preprocessing, descriptors and pairwise geometry (paper II.A, eqs. 1-4)."""
+"""Scan geometry and features, descriptors and pairwise geometry (paper II.A, eqs. 1-4)."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,11 +6,13 @@ import pytest
 
 from scan_helpers import room_scan
 from ssm_localization.matching.descriptors import candidates, shape_context
-from ssm_localization.matching.matcher import MatcherConfig
+from ssm_localization import MatcherConfig
+from ssm_localization.matching.features import ScanFeatures, prepare_scan
 from ssm_localization.matching.pairwise import (affinity_matrix, angle_table, deformation,
                                        distance_table, potential)
-from ssm_localization.matching.scan import (ScanFeatures, downsample_even, local_normals, prepare_scan,
-                                   ranges_to_points, robust_tangents, sweep_direction, tangents)
+from ssm_localization.matching.scan import (as_points, downsample_even, local_normals,
+                                            ranges_to_points, robust_tangents, sweep_direction,
+                                            tangents)
 from ssm_localization.transforms import apply, rotation
 
 
@@ -149,7 +151,6 @@ def test_prepare_scan_drops_nan_and_maps_indices():
     assert f.descriptors.shape == (len(f), cfg.desc_radial_bins * cfg.desc_angular_bins)
     assert not f.is_degenerate
     with pytest.raises(ValueError, match='new_xy'):
-        from ssm_localization.matching.scan import as_points
         as_points(np.ones((4, 3)), 'new_xy')
 
 

@@ -5,10 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssm_localization.io.bags import read_bag
-from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml
+from ssm_localization import (OccupancyMap, SimulationConfig, load_map_yaml, read_bag, simulate,
+                              simulate_bag)
+from ssm_localization.io.simulate import sample_free_poses
 from ssm_localization.mapping.raycast import cast_rays
-from ssm_localization.io.simulate import SimulationConfig, sample_free_poses, simulate, simulate_bag
 
 MAPS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'maps'
 

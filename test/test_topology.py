@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml
-from ssm_localization.mapping.topology import (NODE_KIND_NAMES, NodeKind, TopologyConfig,
+from ssm_localization.config import TopologyConfig
+from ssm_localization.mapping.topology import (NODE_KIND_NAMES, NodeKind,
                                        build_topology)
 
 MAPS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'maps'

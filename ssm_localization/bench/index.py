@@ -5,7 +5,7 @@ SPEC``) so that its peak RSS is honest; the table shows the build wall time, the
 process during the build (``VmHWM`` from /proc, reset after imports and map loading) and its
 increase over the RSS before the build.
 Maps: the shared nav2 maps, maps built from the shared CARMEN logs (when present; built by
-``carmen.build_map`` with its defaults, saved as YAML+PGM in a temporary directory), any
+``io.carmen.build_map`` with its defaults, saved as YAML+PGM in a temporary directory), any
 ``--extra MAP.yaml`` and a deterministic synthetic 100 m x 100 m office at 0.05 m (2000 x 2000).
 Targets (2-core machine): depot / turtlebot3_world < 1 s; the office < 10 s and < 1 GB.
 """
@@ -13,10 +13,18 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
+
+import numpy as np
+
+from ..io.carmen import build_map, read_carmen_log
+from ..mapping.index import build_index
+from ..mapping.map_io import OccupancyMap, load_map_yaml, save_map_yaml
 
 SHARED = Path(__file__).resolve().parents[3] / 'shared' / 'data'
 TARGETS = {'depot': (1.0, None), 'turtlebot3_world': (1.0, None), 'office': (10.0, 1024.0)}
@@ -28,9 +36,6 @@ def office_map(size: float = 100.0, resolution: float = 0.05, seed: int = 0):
     ``size`` x ``size`` metres at ``resolution`` (default 2000 x 2000 cells), frame ``map``,
     origin (0, 0, 0). Walls are 0.15 m thick, corridors 2.4 m wide, doors 1 m wide.
     """
-    import numpy as np
-
-    from ..mapping.map_io import OccupancyMap
     rng = np.random.default_rng(seed)
     n = int(round(size / resolution))
     grid = np.zeros((n, n), dtype=np.int8)
@@ -98,7 +103,6 @@ def office_map(size: float = 100.0, resolution: float = 0.05, seed: int = 0):
 def _load(spec: str):
     if spec.startswith('office'):
         return office_map()
-    from ..mapping.map_io import load_map_yaml
     return load_map_yaml(spec)
 
 
@@ -111,7 +115,6 @@ def _rss_kb(field: str) -> float:
                 return float(line.split()[1])
     except OSError:
         pass
-    import resource
     return float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 
 
@@ -125,9 +128,6 @@ def _reset_peak() -> None:
 
 def _worker(spec: str) -> None:
     """Index one map in this process and print one JSON line."""
-    import time
-
-    from ..mapping.index import build_index
     occ_map = _load(spec)
     base = _rss_kb('VmRSS')
     _reset_peak()
@@ -161,8 +161,6 @@ def run(args: argparse.Namespace) -> int:
             specs.append((name, str(maps / f'{name}.yaml')))
     tmp = tempfile.TemporaryDirectory(prefix='ssm_bench_index_')
     if not args.no_carmen:  # built here, so the worker's peak is the index build alone
-        from ..io.carmen import build_map, read_carmen_log
-        from ..mapping.map_io import save_map_yaml
         for log in sorted((SHARED / 'carmen').glob('*.log.gz')):
             name = log.name.split('-corrected')[0]
             yaml_path = Path(tmp.name) / f'{name}.yaml'

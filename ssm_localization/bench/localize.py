@@ -21,6 +21,16 @@ import dataclasses
 import time
 from pathlib import Path
 
+from ..config.params import load_configs
+from ..config.simulation import SimulationConfig
+from ..evaluation.plotting import plot_replay
+from ..evaluation.replay import replay_scans, summarize
+from ..io.carmen import build_map, log_scan_records, read_carmen_log
+from ..io.simulate import simulate
+from ..localization.localizer import GlobalLocalizer
+from ..mapping.index import build_index
+from ..mapping.map_io import load_map_yaml, save_map_yaml
+
 SIM_SETS = {
     'depot': ('depot', {}),
     'tb3_sandbox': ('tb3_sandbox', {}),
@@ -57,15 +67,12 @@ def _data_dir(arg: str | None) -> Path:
 
 
 def _sim_queries(grid, n: int, seed: int, extra: dict):
-    from ..io.simulate import SimulationConfig, simulate
     sim = simulate(grid, SimulationConfig(count=n, seed=seed, **extra))
     truth = {s.stamp: tuple(float(v) for v in p) for s, p in zip(sim.scans, sim.poses)}
     return sim.scans, truth
 
 
 def _real_queries(data: Path, work: Path, name: str, limit: int):
-    from ..io.carmen import build_map, log_scan_records, read_carmen_log
-    from ..mapping.map_io import load_map_yaml, save_map_yaml
     log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
     map_yaml = work / f'{name}_even.yaml'
     if map_yaml.exists():
@@ -84,12 +91,6 @@ def _real_queries(data: Path, work: Path, name: str, limit: int):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..mapping.index import build_index
-    from ..localization.localizer import GlobalLocalizer
-    from ..mapping.map_io import load_map_yaml
-    from ..config.params import load_configs
-    from ..evaluation.replay import replay_scans, summarize
-
     if args.quick:
         args.n, args.real_max = 60, 60
     sets = DEFAULT_SETS if 'all' in args.sets else args.sets
@@ -121,7 +122,6 @@ def run(args: argparse.Namespace) -> int:
             print(line, flush=True)
             lines.append(line)
             if args.plot_dir and label == 'ssm':
-                from ..evaluation.plotting import plot_replay
                 Path(args.plot_dir).mkdir(parents=True, exist_ok=True)
                 plot_replay(index, rows, Path(args.plot_dir) / f'{name}.png', title=name)
         print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)

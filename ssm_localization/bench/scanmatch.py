@@ -13,6 +13,14 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
+
+from ..config.matcher import HAND_WEIGHTS, MatcherConfig
+from ..io.carmen import read_carmen_log
+from ..matching.descriptors import candidates
+from ..matching.features import prepare_scan
+from ..matching.matcher import match_features
+from ..transforms import apply, compose, inverse, wrap_angle
 
 SCANS = {'intel': ('intel-corrected.log.gz', 26),
          'freiburg-079': ('freiburg-079-corrected.log.gz', 1000)}
@@ -64,7 +72,6 @@ def random_pose(rng, max_xy=0.4, max_yaw=np.deg2rad(30.0)):
 def synthetic_problem(ref: np.ndarray, rng, sigma: float, n_out: int):
     """Paper V.A: noise, then ``n_out`` outliers (x and y swapped), then a random pose.
     Returns ``(new_xy, truth, outlier_mask)`` with ``p_ref = R(truth) p_new + t``."""
-    from ..transforms import apply, inverse
     new = ref + rng.normal(0.0, sigma, ref.shape)
     out = np.zeros(len(ref), dtype=bool)
     if n_out > 0:
@@ -76,9 +83,6 @@ def synthetic_problem(ref: np.ndarray, rng, sigma: float, n_out: int):
 
 
 def run_trial(ref_xy, new_xy, truth, outlier, config) -> Trial:
-    from ..matching.descriptors import candidates
-    from ..matching.matcher import match_features, prepare_scan
-    from ..transforms import apply, wrap_angle
     t0, c0 = time.perf_counter(), time.process_time()
     rf = prepare_scan(ref_xy, config)
     nf = prepare_scan(new_xy, config)
@@ -133,9 +137,6 @@ def table2(ref, rng, config, trials, sigma=0.01, n_out=60):
 
 def true_overlap(ref_xy, new_xy, truth, dist=0.2) -> float:
     """Fraction of the new scan's points within ``dist`` of a reference point at the true pose."""
-    from scipy.spatial import cKDTree
-
-    from ..transforms import apply
     d, _ = cKDTree(ref_xy).query(apply(truth, new_xy), distance_upper_bound=dist)
     return float(np.mean(d < dist))
 
@@ -143,7 +144,6 @@ def true_overlap(ref_xy, new_xy, truth, dist=0.2) -> float:
 def real_pairs(log, rng, config, step, n_pairs):
     """Scans k and k+step with the truth from the corrected poses, plus a random offset.
     Also reports the success over the pairs that truly overlap by at least 50 %."""
-    from ..transforms import apply, compose, inverse
     ks = rng.choice(len(log) - step, n_pairs, replace=False)
     out, ovs = [], []
     for k in ks:
@@ -175,8 +175,6 @@ T2_HEAD = (f'{"":<24} {"x mu":>7} {"x sd":>6} {"y mu":>7} {"y sd":>6} {"th mu":>
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..io.carmen import read_carmen_log
-    from ..matching.matcher import HAND_WEIGHTS, MatcherConfig
     if args.quick:
         args.trials, args.fig4_trials, args.pairs, args.ablation_trials = 60, 8, 30, 30
     data = _data_dir(args) / 'carmen'

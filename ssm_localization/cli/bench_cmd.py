@@ -2,20 +2,21 @@
 from __future__ import annotations
 
 import argparse
-import importlib
+
+from ..bench import index, localize, scanmatch
 
 BENCHES = {
-    'scanmatch': 'scan matching accuracy (paper Table 2, Fig. 4, real scan pairs)',
-    'index': 'index build time and peak memory per map',
-    'localize': 'global localization success, precision, error and latency per data set',
+    'scanmatch': (scanmatch, 'scan matching accuracy (paper Table 2, Fig. 4, real scan pairs)'),
+    'index': (index, 'index build time and peak memory per map'),
+    'localize': (localize, 'global localization success, precision, error and latency per data '
+                           'set'),
 }
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest='bench', metavar='BENCH', required=True)
-    for name, help_text in BENCHES.items():
+    for name, (mod, help_text) in BENCHES.items():
         sp = sub.add_parser(name, help=help_text, description=help_text)
-        mod = importlib.import_module(f'ssm_localization.bench.{name}')
         mod.add_arguments(sp)
         sp.set_defaults(_bench=mod.run)
 

@@ -3,6 +3,10 @@ from __future__ import annotations
 
 import argparse
 
+from ..config.mapping import MapBuildConfig
+from ..io.carmen import convert_carmen
+from ..progress import ProgressBar
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('log', help='CARMEN log (.log or .log.gz) with corrected FLASER poses')
@@ -27,8 +31,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..progress import ProgressBar
-
     if args.resolution <= 0 or args.every < 1 or (args.max_scans or 1) < 1:
         raise ValueError('--resolution must be > 0, --every and --max-scans >= 1')
     bar = ProgressBar(1, 'convert', enabled=not args.quiet)
@@ -44,7 +46,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _convert(args, bar):
-    from ..io.carmen import MapBuildConfig, convert_carmen
     return convert_carmen(args.log, args.out, name=args.name, map_scans=args.map_scans,
                           query_scans=args.query_scans, every=args.every,
                           max_scans=args.max_scans, first=args.first, last=args.last,

@@ -2,6 +2,13 @@
 from __future__ import annotations
 
 import argparse
+import time
+
+from ..config.params import load_index_config
+from ..evaluation.plotting import plot_index
+from ..mapping.index import build_index, save_index
+from ..mapping.map_io import load_map_yaml
+from ..progress import ProgressBar
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -14,12 +21,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import time
-
-    from ..mapping.index import build_index, load_index_config, save_index
-    from ..mapping.map_io import load_map_yaml
-    from ..progress import ProgressBar
-
     config = load_index_config(args.params) if args.params else None
     occ_map = load_map_yaml(args.map)
     bar = ProgressBar(1, 'index', enabled=not args.quiet)
@@ -32,7 +33,6 @@ def run(args: argparse.Namespace) -> int:
           f'map {occ_map.width} x {occ_map.height} cells @ {occ_map.resolution:g} m; '
           f'wrote {path}')
     if args.plot:
-        from ..evaluation.plotting import plot_index
         plot_index(index, args.plot, title=f'{args.map}: {len(index)} nodes')
         print(f'wrote {args.plot}')
     return 0

@@ -3,7 +3,17 @@ log (scan k as reference, scan k+s as new), print the estimate against the corre
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import time
 from pathlib import Path
+
+import numpy as np
+
+from ..config.matcher import MatcherConfig
+from ..evaluation.plotting import plot_match
+from ..io.carmen import read_carmen_log
+from ..matching.matcher import match_scans
+from ..transforms import apply, compose, inverse, wrap_angle
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -19,15 +29,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import dataclasses
-    import time
-
-    import numpy as np
-
-    from ..io.carmen import read_carmen_log
-    from ..matching.matcher import MatcherConfig, match_scans
-    from ..transforms import apply, compose, inverse, wrap_angle
-
     log = read_carmen_log(args.log)
     j = args.k + args.s
     if not (0 <= args.k < len(log) and 0 <= j < len(log)):
@@ -57,7 +58,6 @@ def run(args: argparse.Namespace) -> int:
     print(f'pairs {len(res.pairs)}, inliers {len(res.inliers)}, score {res.score:.1f}, '
           f'overlap {res.overlap:.2f}, {ms:.1f} ms')
     if args.plot:
-        from ..evaluation.plotting import plot_match
         out = plot_match(ref, new, res.pose, args.plot, pairs=res.inliers, truth=truth,
                          title=f'{log.name} scan {args.k} vs {j}: error '
                                f'{np.hypot(err[0], err[1]) * 1e3:.0f} mm / '

@@ -2,6 +2,16 @@
 from __future__ import annotations
 
 import argparse
+import time
+
+from ..config.params import load_configs
+from ..evaluation.plotting import plot_replay
+from ..evaluation.replay import replay_scans, summarize, write_results_csv
+from ..io.bag_reader import read_bag
+from ..localization.localizer import GlobalLocalizer
+from ..mapping.index import build_index, load_index
+from ..mapping.map_io import load_map_yaml
+from ..progress import ProgressBar
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -18,16 +28,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import time
-
-    from ..io.bags import read_bag
-    from ..mapping.index import build_index, load_index
-    from ..localization.localizer import GlobalLocalizer
-    from ..mapping.map_io import load_map_yaml
-    from ..config.params import load_configs
-    from ..progress import ProgressBar
-    from ..evaluation.replay import replay_scans, summarize, write_results_csv
-
     index_cfg, loc_cfg = load_configs(args.params)
     bag = read_bag(args.bag, scan_topic=args.scan_topic)
     if not bag.scans:
@@ -49,7 +49,6 @@ def run(args: argparse.Namespace) -> int:
     if any(r.has_truth for r in rows):
         print(summarize(rows).format('replay'))
     if args.plot:
-        from ..evaluation.plotting import plot_replay
         plot_replay(index, rows, args.plot)
         print(f'wrote {args.plot}')
     return 0

@@ -4,6 +4,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..config.simulation import SimulationConfig
+from ..io.simulate import simulate_bag
+from ..mapping.map_io import load_map_yaml
+from ..progress import ProgressBar
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('map', help='map_server map (YAML + image)')
@@ -28,10 +33,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..mapping.map_io import load_map_yaml
-    from ..progress import ProgressBar
-    from ..io.simulate import SimulationConfig, simulate_bag
-
     cfg = SimulationConfig(count=args.count, beams=args.beams, fov_deg=args.fov,
                            max_range=args.max_range, noise_sigma=args.noise,
                            clearance=args.clearance, clutter=args.clutter,

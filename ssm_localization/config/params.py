@@ -14,11 +14,15 @@ Unknown keys raise ``ValueError`` naming the key, so typos do not pass silently.
 from __future__ import annotations
 
 import dataclasses
+import json
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
+
+from .localization import LocalizerConfig
+from .mapping import IndexConfig, TopologyConfig
 
 T = TypeVar('T')
 
@@ -99,6 +103,16 @@ def from_dict(cls: type[T], data: dict | None, where: str = '') -> T:
     return dataclasses.replace(defaults, **kwargs)
 
 
+def config_to_json(config: Any) -> str:
+    """A config dataclass as JSON of its dotted field names (how an index file stores it)."""
+    return json.dumps(flatten(config), sort_keys=True)
+
+
+def config_from_json(cls: type[T], text: str) -> T:
+    """Inverse of :func:`config_to_json`."""
+    return from_dict(cls, unflatten(json.loads(text)))
+
+
 def _coerce(value: Any, default: Any, hint: Any, name: str) -> Any:
     try:
         if isinstance(default, bool):
@@ -145,8 +159,6 @@ KNOWN_TOP_LEVEL = ('index', 'localizer', 'laser_x', 'laser_y', 'laser_yaw')
 
 def load_configs(path: str | Path | None, node: str = 'global_localizer'):
     """``(IndexConfig, LocalizerConfig)`` from a params file (defaults where absent)."""
-    from ..mapping.index import IndexConfig
-    from ..localization.localizer import LocalizerConfig
     data = load_yaml_mapping(path) if path else {}
     ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
     section = node_section(data, node)
@@ -166,3 +178,44 @@ def load_configs(path: str | Path | None, node: str = 'global_localizer'):
     except (TypeError, ValueError) as exc:
         raise ValueError(f'{path}: {exc}') from None
     return index_cfg, loc_cfg
+
+
+def load_index_config(path: str | Path) -> IndexConfig:
+    """:class:`IndexConfig` from a YAML params file (``yaml.safe_load``).
+
+    Accepts a flat mapping of IndexConfig / TopologyConfig field names (nested ``topology:`` and
+    ``matcher:`` mappings allowed), a ROS params file ``map_indexer: ros__parameters: {...}``
+    (dotted names allowed; keys that are not index parameters are left to the node), or a
+    ``global_localizer`` params file with an ``index:`` section.
+    """
+    data = load_yaml_mapping(path)
+    ros = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
+    section = node_section(data, 'map_indexer') if ros else data
+    if ros and not section:
+        section = node_section(data, 'global_localizer')
+    if any('.' in str(key) for key in section):
+        section = unflatten(section)
+    laser = laser_pose_of_section(section)
+    if isinstance(section.get('index'), dict):
+        section = section['index']
+    idx_names = {f.name for f in dataclasses.fields(IndexConfig)}
+    topo_names = {f.name for f in dataclasses.fields(TopologyConfig)}
+    topo = dict(section.get('topology') or {})
+    kwargs = {}
+    for key, value in section.items():
+        if key == 'topology':
+            continue
+        if key in idx_names:
+            kwargs[key] = value
+        elif key in topo_names:
+            topo[key] = value
+        elif not ros:
+            kwargs[key] = value  # from_dict names the unknown key
+    if topo:
+        kwargs['topology'] = topo
+    if laser is not None:           # the nodes' laser_x/y/yaw: the laser on the base
+        kwargs['sensor_pose'] = list(laser)
+    try:
+        return from_dict(IndexConfig, kwargs)
+    except ValueError as exc:
+        raise ValueError(f'{path}: {exc}') from None

@@ -1,8 +1,16 @@
-"""Figures people would rather see than read (PNG via matplotlib, imported lazily)."""
+"""Figures people would rather see than read (PNG via matplotlib, imported on first use)."""
 from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..mapping.topology import NODE_KIND_NAMES
+from ..transforms import apply
 
 
 def _pyplot():
+    """matplotlib's pyplot on the Agg backend (matplotlib is optional: imported here only)."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -11,7 +19,6 @@ def _pyplot():
 
 def _map_figure(grid, width: float, extra_height: float):
     """A figure showing ``grid`` (OccupancyMap) in map coordinates: ``(plt, fig, ax, extent)``."""
-    import numpy as np
     plt = _pyplot()
     h, w = grid.data.shape
     ox, oy, _ = grid.origin
@@ -25,7 +32,6 @@ def _map_figure(grid, width: float, extra_height: float):
 
 def plot_replay(index, rows, path, title: str = '') -> None:
     """Map, topological nodes, ground truth and estimates (colored by status) of a replay."""
-    import numpy as np
     plt, fig, ax, _ = _map_figure(index.map, 9, 0.5)
     ax.scatter(index.node_xy[:, 0], index.node_xy[:, 1], s=6, c='tab:blue', alpha=0.5,
                label='nodes')
@@ -56,8 +62,6 @@ def plot_replay(index, rows, path, title: str = '') -> None:
 
 def plot_index(index, path, title: str = '', show_ids: bool = True) -> None:
     """Map, GVD and topological nodes (colored by kind, with their ids) of a ``MapIndex``."""
-    import numpy as np
-    from ..mapping.topology import NODE_KIND_NAMES
     plt, fig, ax, extent = _map_figure(index.map, 10, 0.8)
     h, w = index.map.data.shape
     gvd = np.ma.masked_where(~np.asarray(index.gvd_mask, dtype=bool), np.ones((h, w)))
@@ -94,10 +98,6 @@ def plot_match(ref_xy, new_xy, pose, out, pairs=None, truth=None, title: str = '
     known, else unaligned) and the new scan moved by the estimated ``pose`` over the reference,
     with the ``pairs`` (K, 2) correspondences (indices into ref_xy / new_xy) as segments.
     Writes a PNG to ``out`` and returns its path."""
-    import numpy as np
-    from pathlib import Path
-
-    from ..transforms import apply
     plt = _pyplot()
     ref = np.asarray(ref_xy, float).reshape(-1, 2)
     new = np.asarray(new_xy, float).reshape(-1, 2)
@@ -111,10 +111,11 @@ def plot_match(ref_xy, new_xy, pose, out, pairs=None, truth=None, title: str = '
     moved = apply(pose, new) if ok else new
     if pairs is not None and len(pairs) and ok:
         pr = np.asarray(pairs, int)
-        segs = np.stack((ref[pr[:, 0]], moved[pr[:, 1]]), axis=1)
-        from matplotlib.collections import LineCollection
-        ax.add_collection(LineCollection(segs, colors='0.6', linewidths=0.6,
-                                         label=f'{len(pr)} correspondences'))
+        a, b = ref[pr[:, 0]], moved[pr[:, 1]]
+        gap = np.full(len(pr), np.nan)     # one polyline, NaN-separated segments a -> b
+        ax.plot(np.column_stack((a[:, 0], b[:, 0], gap)).ravel(),
+                np.column_stack((a[:, 1], b[:, 1], gap)).ravel(), color='0.6', lw=0.6,
+                label=f'{len(pr)} correspondences')
     ax.plot(ref[:, 0], ref[:, 1], '.', color='tab:red', ms=3, label='reference')
     ax.plot(moved[:, 0], moved[:, 1], '.', color='tab:blue', ms=3, label='new at estimate')
     if truth is not None:

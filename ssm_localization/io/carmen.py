@@ -13,15 +13,18 @@ from __future__ import annotations
 import gzip
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
+from ..config.mapping import MapBuildConfig
+from ..mapping.grid import build_grid_map
+from ..mapping.map_io import OccupancyMap, save_map_yaml
 from ..progress import ProgressCallback
-from ..transforms import compose, inverse
-
-if TYPE_CHECKING:
-    from ..mapping.map_io import OccupancyMap
+from ..transforms import apply, compose, inverse
+from .bag_records import ScanRecord
+from .bag_writer import write_bag
 
 #: no-return readings of the shared logs (the sensor maximum), by file-name prefix
 NO_RETURN = {'intel': 81.83, 'aces': 50.0, 'freiburg-079': 81.91}
@@ -134,118 +137,6 @@ def read_carmen_log(path: str | Path, max_range: float | None = None) -> CarmenL
 
 # ---------------------------------------------------------------- map building
 
-@dataclass(frozen=True)
-class MapBuildConfig:
-    """Occupancy-grid building from scans at known poses (hit / miss counting)."""
-
-    resolution: float = 0.05
-    margin: float = 1.0            # metres of unknown border around the observed area
-    max_range: float = 40.0        # finite readings beyond this only clear space up to it
-    free_cap: float = 5.0          # no-return beams clear space up to this distance
-    occupied_ratio: float = 0.3    # occupied if hits >= ratio * (hits + misses)
-    min_hits: int = 1
-    chunk_beams: int = 20000       # beams traversed per vectorized batch
-
-
-def _beam_segments(ranges, poses, beam_angles, cfg: MapBuildConfig):
-    """Flattened beams: start xy, unit direction, free length, has-hit flag."""
-    r = np.asarray(ranges, dtype=float)
-    hit = np.isfinite(r) & (r > 0.0) & (r <= cfg.max_range)
-    length = np.where(hit, r, np.where(np.isfinite(r) & (r > cfg.max_range), cfg.max_range,
-                                       min(cfg.free_cap, cfg.max_range)))
-    ang = poses[:, 2:3] + np.asarray(beam_angles)[None, :]
-    start = np.repeat(poses[:, :2], r.shape[1], axis=0)
-    direction = np.column_stack((np.cos(ang).ravel(), np.sin(ang).ravel()))
-    return start, direction, length.ravel(), hit.ravel()
-
-
-def build_occupancy_grid(ranges: np.ndarray, poses: np.ndarray, beam_angles: np.ndarray,
-                         config: MapBuildConfig | None = None,
-                         progress: ProgressCallback | None = None
-                         ) -> tuple[np.ndarray, tuple[float, float, float]]:
-    """Trinary occupancy grid (int8: 100 occupied, 0 free, -1 unknown) and its origin.
-
-    ``ranges`` (S, n) with ``inf`` for no return, ``poses`` (S, 3) laser poses in the world
-    frame, ``beam_angles`` (n,). Cells along each beam (sampled every half cell) count a miss,
-    the end cell of a finite reading a hit. Rows grow with y, columns with x (OccupancyGrid).
-    """
-    cfg = config or MapBuildConfig()
-    ranges = np.atleast_2d(np.asarray(ranges, dtype=float))
-    poses = np.atleast_2d(np.asarray(poses, dtype=float))
-    if ranges.size == 0 or len(ranges) != len(poses):
-        raise ValueError(f'need scans and one pose per scan, got {ranges.shape} / {poses.shape}')
-    if not np.all(np.isfinite(poses)):
-        raise ValueError('scan poses must be finite')
-    res = float(cfg.resolution)
-    start, direction, length, hit = _beam_segments(ranges, poses, beam_angles, cfg)
-    end = start + direction * length[:, None]
-    lo = np.minimum(end.min(0), poses[:, :2].min(0)) - cfg.margin
-    hi = np.maximum(end.max(0), poses[:, :2].max(0)) + cfg.margin
-    origin = (round(float(np.floor(lo[0] / res) * res), 9),
-              round(float(np.floor(lo[1] / res) * res), 9), 0.0)
-    width = int(np.ceil((hi[0] - origin[0]) / res))
-    height = int(np.ceil((hi[1] - origin[1]) / res))
-    org = np.array(origin[:2])
-    hits = np.zeros(height * width, dtype=np.int64)
-    misses = np.zeros(height * width, dtype=np.int64)
-
-    def cell_index(xy):
-        cr = np.floor((xy - org) / res).astype(np.int64)
-        return np.clip(cr[:, 1], 0, height - 1) * width + np.clip(cr[:, 0], 0, width - 1)
-
-    hits += np.bincount(cell_index(end[hit]), minlength=height * width)
-    step = 0.5 * res
-    free_len = np.where(hit, length - step, length)
-    n_samples = np.maximum(np.ceil(free_len / step).astype(np.int64), 0)
-    total = len(length)
-    # Pass 1: beams with a return. Pass 2: beams without one clear space up to the cap, but
-    # stop at the first cell pass 1 found occupied (no clearing behind walls).
-    order = np.concatenate((np.flatnonzero(hit), np.flatnonzero(~hit)))
-    n_hit = int(hit.sum())
-    occupied = None
-    done = 0
-    for first_pass, ids in ((True, order[:n_hit]), (False, order[n_hit:])):
-        if not first_pass:
-            occupied = (hits >= cfg.min_hits) & (hits >= cfg.occupied_ratio * (hits + misses))
-        for a in range(0, len(ids), cfg.chunk_beams):
-            chunk = ids[a:a + cfg.chunk_beams]
-            counts = n_samples[chunk]
-            beam = np.repeat(chunk, counts)
-            done += len(chunk)
-            if beam.size:
-                offsets = np.cumsum(counts) - counts
-                k = np.arange(beam.size) - np.repeat(offsets, counts)
-                cells = cell_index(start[beam] + direction[beam] * (k * step)[:, None])
-                keep = np.ones(cells.size, dtype=bool)   # one miss per beam and cell
-                keep[1:] = (cells[1:] != cells[:-1]) | (beam[1:] != beam[:-1])
-                if not first_pass:
-                    blocked = occupied[cells]
-                    stop = np.full(total, np.iinfo(np.int64).max)
-                    np.minimum.at(stop, beam[blocked], k[blocked])
-                    keep &= k < stop[beam]
-                misses += np.bincount(cells[keep], minlength=height * width)
-            if progress is not None:
-                progress(done, total, 'building map')
-    occupied = (hits >= cfg.min_hits) & (hits >= cfg.occupied_ratio * (hits + misses))
-    data = np.full(height * width, -1, dtype=np.int8)
-    data[misses > 0] = 0
-    data[occupied] = 100
-    return _crop_known(data.reshape(height, width), origin, res, cfg.margin)
-
-
-def _crop_known(data: np.ndarray, origin, res: float, margin: float):
-    """Crop the grid to its observed cells plus ``margin`` metres of unknown."""
-    known = data != -1
-    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
-    if rows.size == 0:
-        return data, origin
-    m = int(round(margin / res))
-    r0, r1 = max(rows[0] - m, 0), min(rows[-1] + m + 1, data.shape[0])
-    c0, c1 = max(cols[0] - m, 0), min(cols[-1] + m + 1, data.shape[1])
-    return (np.ascontiguousarray(data[r0:r1, c0:c1]),
-            (round(origin[0] + c0 * res, 9), round(origin[1] + r0 * res, 9), origin[2]))
-
-
 def select_scans(count: int, which: str = 'all', every: int = 1, first: int | None = None,
                  last: int | None = None, max_scans: int | None = None) -> np.ndarray:
     """Scan indices: ``which`` in even/odd/all within ``[first, last)``, every ``every``-th."""
@@ -262,25 +153,19 @@ def select_scans(count: int, which: str = 'all', every: int = 1, first: int | No
 
 def build_map(log: CarmenLog, indices: Sequence[int] | None = None,
               config: MapBuildConfig | None = None, beam_angles: np.ndarray | None = None,
-              progress: ProgressCallback | None = None) -> 'OccupancyMap':
+              progress: ProgressCallback | None = None) -> OccupancyMap:
     """Occupancy map of ``log`` from the scans ``indices`` (default: the even ones)."""
-    from ..mapping.map_io import OccupancyMap
     idx = select_scans(len(log), 'even') if indices is None else np.asarray(indices, dtype=int)
     if idx.size == 0:
         raise ValueError(f'{log.name}: no scans selected for the map')
     angles = log.beam_angles() if beam_angles is None else np.asarray(beam_angles, dtype=float)
-    data, origin = build_occupancy_grid(log.ranges[idx], log.poses[idx], angles, config, progress)
-    cfg = config or MapBuildConfig()
-    return OccupancyMap(data=data, resolution=float(cfg.resolution), origin=origin)
+    return build_grid_map(log.ranges[idx], log.poses[idx], angles, config, progress)
 
 
-def endpoint_fit(occ_map: 'OccupancyMap', log: CarmenLog, indices: Sequence[int],
+def endpoint_fit(occ_map: OccupancyMap, log: CarmenLog, indices: Sequence[int],
                  beam_angles: np.ndarray | None = None, max_range: float = 20.0) -> np.ndarray:
     """Distance (m) from each finite endpoint (range < max_range) of the scans ``indices``, placed
     at their corrected poses, to the nearest occupied cell centre of ``occ_map``."""
-    from scipy.ndimage import distance_transform_edt
-
-    from ..transforms import apply
     occ = np.asarray(occ_map.data) >= 65
     if not occ.any():
         raise ValueError('map has no occupied cells')
@@ -314,10 +199,9 @@ def monotonic_stamps(stamps: np.ndarray, min_step: float = 1e-3) -> np.ndarray:
     return out
 
 
-def log_scan_records(log: CarmenLog, indices: Sequence[int]) -> list:
-    """:class:`~ssm_localization.bags.ScanRecord` s of the scans ``indices`` (frame ``laser``,
+def log_scan_records(log: CarmenLog, indices: Sequence[int]) -> list[ScanRecord]:
+    """:class:`~ssm_localization.io.bag_records.ScanRecord` s of the scans ``indices`` (frame ``laser``,
     float32 ranges, ``+inf`` for no return, ``range_max`` = the no-return value)."""
-    from .bags import ScanRecord
     stamps = monotonic_stamps(log.stamps)
     return [ScanRecord.from_ranges(stamps[k], log.ranges[k].astype(np.float32), log.angle_min,
                                    log.angle_increment, range_min=0.0,
@@ -326,12 +210,11 @@ def log_scan_records(log: CarmenLog, indices: Sequence[int]) -> list:
 
 
 def write_log_bag(log: CarmenLog, indices: Sequence[int], path: str | Path,
-                  occ_map: 'OccupancyMap | None' = None, with_odom: bool = True,
+                  occ_map: OccupancyMap | None = None, with_odom: bool = True,
                   overwrite: bool = False, progress: ProgressCallback | None = None) -> Path:
     """A bag with /map (``occ_map``), /scan (the scans ``indices``), /ground_truth (their
     corrected poses: the log's world frame is the map frame and the base is the laser) and
     /odom (raw odometry rebuilt from the ODOM lines, when the log has it)."""
-    from .bags import write_bag
     scans = log_scan_records(log, indices)
     idx = np.asarray(indices, dtype=int)
     gt = {s.stamp: tuple(float(v) for v in log.poses[k]) for s, k in zip(scans, idx)}
@@ -364,7 +247,6 @@ def convert_carmen(log_path: str | Path, out_dir: str | Path, name: str | None =
     ``OUT/NAME_queries/`` (the ``query_scans`` scans, every ``every``-th, at most ``max_scans``).
     ``first``/``last`` restrict both to the scan index range ``[first, last)``; ``bag_path``
     overrides the bag's location."""
-    from ..mapping.map_io import save_map_yaml
     log = read_carmen_log(log_path)
     name = name or log.name
     out_dir = Path(out_dir)

@@ -11,59 +11,22 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
+from ..config.simulation import SimulationConfig
 from ..mapping.map_io import OccupancyMap
+from ..mapping.raycast import cast_rays
 from ..progress import ProgressCallback
 from ..transforms import compose
-
-
-@dataclass(frozen=True)
-class SimulationConfig:
-    """How to simulate query scans (lengths in metres, angles in degrees where named so)."""
-
-    count: int = 50
-    beams: int = 360
-    fov_deg: float = 360.0            # centred on the sensor's x axis
-    max_range: float = 30.0           # no hit within it -> +inf
-    range_min: float = 0.05
-    noise_sigma: float = 0.01         # Gaussian range noise
-    clearance: float = 0.3            # minimum distance from the base to non-free cells
-    clutter: int = 0                  # unmapped discs per scan
-    clutter_radius: tuple[float, float] = (0.1, 0.3)
-    clutter_distance: tuple[float, float] = (1.0, 4.0)   # disc centre from the sensor
-    short_fraction: float = 0.0       # fraction of beams replaced by a random shorter reading
-    sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # laser pose on the base
-    seed: int = 0
-    stamp0: float = 1.0
-    period: float = 0.1
-
-    def validate(self) -> None:
-        if self.count < 1 or self.beams < 2:
-            raise ValueError(f'simulation: count must be >= 1 and beams >= 2, '
-                             f'got {self.count}, {self.beams}')
-        if not 0.0 < self.fov_deg <= 360.0:
-            raise ValueError(f'simulation: fov_deg must be in (0, 360], got {self.fov_deg}')
-        if not (self.max_range > self.range_min >= 0.0):
-            raise ValueError('simulation: need max_range > range_min >= 0')
-        if self.noise_sigma < 0 or self.clearance < 0 or self.clutter < 0:
-            raise ValueError('simulation: noise_sigma, clearance and clutter must be >= 0')
-        if not 0.0 <= self.short_fraction <= 1.0:
-            raise ValueError(f'simulation: short_fraction must be in [0, 1], '
-                             f'got {self.short_fraction}')
-
-    def angles(self) -> tuple[float, float]:
-        """``(angle_min, angle_increment)`` of the simulated LaserScan."""
-        fov = math.radians(self.fov_deg)
-        if self.fov_deg >= 360.0:
-            return -math.pi, 2.0 * math.pi / self.beams
-        return -fov / 2.0, fov / (self.beams - 1)
+from .bag_records import ScanRecord
+from .bag_writer import write_bag
 
 
 @dataclass(frozen=True, eq=False)
 class Simulation:
     """Simulated scans and their truth."""
 
-    scans: list                  # list[bags.ScanRecord], frame 'laser'
+    scans: list[ScanRecord]      # frame 'laser'
     poses: np.ndarray            # (P, 3) base poses in the map frame (the ground truth)
     sensor_poses: np.ndarray     # (P, 3) laser poses in the map frame
     clean_ranges: np.ndarray     # (P, B) ray-cast ranges on the map, before clutter and noise
@@ -74,7 +37,6 @@ def sample_free_poses(occ_map: OccupancyMap, count: int, clearance: float,
                       rng: np.random.Generator) -> np.ndarray:
     """(count, 3) poses uniform over free cells at least ``clearance`` from non-free cells
     (unknown counts as an obstacle), uniform within the cell, yaw uniform in [-pi, pi)."""
-    from scipy.ndimage import distance_transform_edt
     free = occ_map.free_mask()
     dist = distance_transform_edt(free) * occ_map.resolution
     rows, cols = np.nonzero(free & (dist >= max(clearance, 0.0) + 0.5 * occ_map.resolution))
@@ -111,9 +73,6 @@ def _disc_ranges(sensor_poses: np.ndarray, angles: np.ndarray, cfg: SimulationCo
 def simulate(occ_map: OccupancyMap, config: SimulationConfig | None = None,
              progress: ProgressCallback | None = None) -> Simulation:
     """Simulate ``config.count`` scans at random poses of ``occ_map`` (see SimulationConfig)."""
-    from .bags import ScanRecord
-    from ..mapping.raycast import cast_rays
-
     cfg = config or SimulationConfig()
     cfg.validate()
     pose_rng, clutter_rng, noise_rng = (np.random.default_rng(s) for s in
@@ -150,7 +109,6 @@ def simulate(occ_map: OccupancyMap, config: SimulationConfig | None = None,
 def simulate_bag(occ_map: OccupancyMap, path: str | Path, config: SimulationConfig | None = None,
                  overwrite: bool = False, progress: ProgressCallback | None = None) -> Simulation:
     """Simulate and write a bag with /map, /scan and /ground_truth (base poses)."""
-    from .bags import write_bag
     sim = simulate(occ_map, config, progress)
     gt = {s.stamp: tuple(float(v) for v in p) for s, p in zip(sim.scans, sim.poses)}
     write_bag(path, map=occ_map, scans=sim.scans, ground_truth=gt, overwrite=overwrite)

@@ -1,8 +1,9 @@
-"""Pose refinement and verification against the map itself (beyond the paper).
+"""Pose refinement against the map itself (beyond the paper).
 
 The paper stops at the RANSAC pose relative to a node's virtual scan, so its accuracy is bounded
 by the virtual scan's sampling. Here the winning hypotheses are refined by Gauss-Newton on the
-signed distance of the scan endpoints to the map's wall surface and checked by ray casting.
+signed distance of the scan endpoints to the map's wall surface (``verify.py`` then checks them
+by ray casting).
 
 Where the wall surface lies is an explicit model choice (``surface_depth``, in cells):
 - ``0.0``: at the boundary of the occupied cells. Right for scans ray-cast on the same grid
@@ -180,38 +181,3 @@ def _transform(poses: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarr
     rel = np.stack((c[:, None] * pts[:, 0] - s[:, None] * pts[:, 1],
                     s[:, None] * pts[:, 0] + c[:, None] * pts[:, 1]), axis=2)
     return rel + poses[:, None, :2], rel
-
-
-@dataclass(frozen=True)
-class BeamCheck:
-    """Ray-cast agreement of a scan with the map at a pose (fractions of the valid beams)."""
-
-    consistent: float     # |z - z_map| < tol
-    contradicting: float  # z > z_map + tol: the beam went through a wall
-    short: float          # z < z_map - tol: unmapped object (clutter), neither good nor bad
-
-    @property
-    def score(self) -> float:
-        return self.consistent - 2.0 * self.contradicting
-
-
-def check_beams(measured: np.ndarray, expected: np.ndarray, tol: float = 0.15,
-                rel_tol: float = 0.02) -> BeamCheck:
-    """Compare measured ranges with ranges ray-cast on the map (``inf`` = no return / no hit).
-
-    Beams with no return where the map expects none are consistent; a no-return where the map has
-    a wall counts as neither (glass, dark surfaces), so only solid evidence contradicts a pose.
-    """
-    z = np.asarray(measured, float)
-    e = np.asarray(expected, float)
-    n = max(len(z), 1)
-    zf, ef = np.isfinite(z), np.isfinite(e)
-    both = zf & ef
-    t = tol + rel_tol * np.where(both, e, 0.0)
-    with np.errstate(invalid='ignore'):
-        diff = np.where(both, z - e, 0.0)
-    consistent = (both & (np.abs(diff) < t)) | (~zf & ~ef)
-    contradicting = (both & (diff >= t)) | (zf & ~ef)
-    short = both & (diff <= -t)
-    return BeamCheck(consistent=float(consistent.sum() / n),
-                     contradicting=float(contradicting.sum() / n), short=float(short.sum() / n))

@@ -3,14 +3,12 @@
 ``build_index`` extracts the nodes (``topology.py``), casts a virtual scan at every node
 (``raycast.py``, Table 1: the virtual laser's pose is the node pose ``(x, y, 0)`` composed with
 the sensor pose on the robot) and precomputes the matcher's per-scan features
-(``scan.prepare_scan``). ``save_index`` / ``load_index`` store it as a versioned ``.npz`` without
+(``matching.features.prepare_scan``). ``save_index`` / ``load_index`` store it as a versioned ``.npz`` without
 pickles: arrays, the map checksum and every parameter as a JSON string.
 """
 from __future__ import annotations
 
 import dataclasses
-import json
-import math
 import os
 import zipfile
 from dataclasses import dataclass, field
@@ -18,60 +16,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .map_io import OccupancyMap
-from ..matching.matcher import MatcherConfig
+from ..config.mapping import IndexConfig
+from ..config.params import config_from_json, config_to_json
+from ..matching.features import ScanFeatures, prepare_scan
 from ..progress import ProgressCallback
+from ..transforms import compose
+from .map_io import OccupancyMap
 from .raycast import RayCaster
 from .raycast import beam_angles as _beam_angles
-from ..matching.scan import ScanFeatures, prepare_scan
-from .topology import NODE_KIND_NAMES, NodeKind, TopologyConfig, build_topology, count_kinds
-from ..transforms import compose
+from .topology import build_topology, count_kinds
 
 #: Version of the ``.npz`` layout written by :func:`save_index`; other versions are refused.
 FORMAT_VERSION = 1
 
-__all__ = ['FORMAT_VERSION', 'IndexConfig', 'MapIndex', 'NodeKind', 'NODE_KIND_NAMES',
-           'build_index', 'save_index', 'load_index', 'load_index_config']
-
-
-@dataclass(frozen=True)
-class IndexConfig:
-    """Index parameters. ``beams`` virtual beams over 360 deg from -pi counterclockwise,
-    ``max_range`` (m) of the virtual laser, ``sensor_pose`` (x, y, yaw) of the laser on the robot
-    (Table 1: x_sens, y_sens, theta_sens), ``occupied_thresh``: occupancy at or above which a cell
-    stops a beam (unknown cells do not)."""
-
-    topology: TopologyConfig = field(default_factory=TopologyConfig)
-    beams: int = 360
-    max_range: float = 20.0
-    sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    occupied_thresh: int = 65
-    matcher: MatcherConfig = field(default_factory=MatcherConfig)
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.beams, int) or isinstance(self.beams, bool) or self.beams < 8:
-            raise ValueError(f'IndexConfig.beams: expected an integer >= 8, got {self.beams!r}')
-        if not (isinstance(self.max_range, (int, float)) and self.max_range > 0
-                and math.isfinite(self.max_range)):
-            raise ValueError(f'IndexConfig.max_range: expected a number > 0, got '
-                             f'{self.max_range!r}')
-        pose = tuple(float(v) for v in self.sensor_pose)
-        if len(pose) != 3 or not all(map(math.isfinite, pose)):
-            raise ValueError(f'IndexConfig.sensor_pose: expected finite (x, y, yaw), got '
-                             f'{self.sensor_pose!r}')
-        object.__setattr__(self, 'sensor_pose', pose)
-        if not 1 <= self.occupied_thresh <= 100:
-            raise ValueError(f'IndexConfig.occupied_thresh: expected 1..100, got '
-                             f'{self.occupied_thresh!r}')
-
-    def to_json(self) -> str:
-        from ..config.params import flatten
-        return json.dumps(flatten(self), sort_keys=True)
-
-    @classmethod
-    def from_json(cls, text: str) -> 'IndexConfig':
-        from ..config.params import from_dict, unflatten
-        return from_dict(cls, unflatten(json.loads(text)))
+__all__ = ['FORMAT_VERSION', 'MapIndex', 'build_index', 'save_index', 'load_index']
 
 
 def _empty(shape, dtype) -> np.ndarray:
@@ -159,7 +117,7 @@ def save_index(index: MapIndex, path: str | Path) -> Path:
     path = Path(path)
     arrays: dict[str, np.ndarray] = {
         'format_version': np.asarray(FORMAT_VERSION, dtype=np.int64),
-        'config_json': np.asarray(index.config.to_json()),
+        'config_json': np.asarray(config_to_json(index.config)),
         'map_checksum': np.asarray(index.map_checksum),
         'map_data': index.map.data,
         'map_resolution': np.asarray(index.map.resolution, dtype=np.float64),
@@ -228,7 +186,7 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None) -> Ma
                              f'expected {expected_map.checksum()[:12]}...); rebuild it for '
                              f'this map')
         try:
-            config = IndexConfig.from_json(str(data['config_json']))
+            config = config_from_json(IndexConfig, str(data['config_json']))
         except (ValueError, TypeError) as exc:
             raise ValueError(f'stored parameters do not fit this ssm_localization ({exc}); '
                              f'rebuild the index') from None
@@ -258,48 +216,3 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None) -> Ma
     if not shapes_ok:
         raise ValueError(f'{path}: inconsistent array shapes (corrupt file)')
     return index
-
-
-# --------------------------------------------------------------------------- parameters
-
-def load_index_config(path: str | Path) -> IndexConfig:
-    """:class:`IndexConfig` from a YAML params file (``yaml.safe_load``).
-
-    Accepts a flat mapping of IndexConfig / TopologyConfig field names (nested ``topology:`` and
-    ``matcher:`` mappings allowed), a ROS params file ``map_indexer: ros__parameters: {...}``
-    (dotted names allowed; keys that are not index parameters are left to the node), or a
-    ``global_localizer`` params file with an ``index:`` section.
-    """
-    from ..config.params import (from_dict, laser_pose_of_section, load_yaml_mapping, node_section,
-                         unflatten)
-    data = load_yaml_mapping(path)
-    ros = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
-    section = node_section(data, 'map_indexer') if ros else data
-    if ros and not section:
-        section = node_section(data, 'global_localizer')
-    if any('.' in str(key) for key in section):
-        section = unflatten(section)
-    laser = laser_pose_of_section(section)
-    if isinstance(section.get('index'), dict):
-        section = section['index']
-    idx_names = {f.name for f in dataclasses.fields(IndexConfig)}
-    topo_names = {f.name for f in dataclasses.fields(TopologyConfig)}
-    topo = dict(section.get('topology') or {})
-    kwargs = {}
-    for key, value in section.items():
-        if key == 'topology':
-            continue
-        if key in idx_names:
-            kwargs[key] = value
-        elif key in topo_names:
-            topo[key] = value
-        elif not ros:
-            kwargs[key] = value  # from_dict names the unknown key
-    if topo:
-        kwargs['topology'] = topo
-    if laser is not None:           # the nodes' laser_x/y/yaw: the laser on the base
-        kwargs['sensor_pose'] = list(laser)
-    try:
-        return from_dict(IndexConfig, kwargs)
-    except ValueError as exc:
-        raise ValueError(f'{path}: {exc}') from None

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from PIL import Image, UnidentifiedImageError
 
 from ..transforms import quaternion_to_yaw
 
@@ -147,7 +148,6 @@ def _field(doc: dict, name: str, path: Path, kind, required: bool = True, defaul
 
 def _image_shade(path: Path) -> np.ndarray:
     """Brightness in [0, 1] per pixel (mean of the colour channels; alpha ignored)."""
-    from PIL import Image, UnidentifiedImageError
     try:
         with Image.open(path) as img:
             img.load()
@@ -232,7 +232,6 @@ def save_map_yaml(occ_map: OccupancyMap, yaml_path: str | Path) -> Path:
     Occupied (``>= 65``) -> 0, free (``0..25``) -> 254, anything else -> 205 (unknown), with
     ``occupied_thresh: 0.65``, ``free_thresh: 0.196`` as map_saver writes them.
     """
-    from PIL import Image
     yaml_path = Path(yaml_path)
     pgm = yaml_path.with_suffix('.pgm')
     img = np.full(occ_map.shape, 205, dtype=np.uint8)

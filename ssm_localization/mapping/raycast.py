@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import ndimage
 
 
 class RayCaster:
@@ -41,7 +42,6 @@ class RayCaster:
         if not accelerate:
             self._skip = np.zeros(code.size, dtype=np.float32)
         elif occ.any():
-            from scipy import ndimage
             edt = ndimage.distance_transform_edt(code != 1).astype(np.float32)
             self._skip = np.maximum(edt - np.float32(math.sqrt(2.0) + 1e-3), 0).ravel()
         else:

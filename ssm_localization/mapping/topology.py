@@ -36,9 +36,11 @@ import numpy as np
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import cKDTree
 
-from .map_io import OccupancyMap
+from ..config.mapping import TopologyConfig
 from ..progress import ProgressCallback
+from .map_io import OccupancyMap
 
 
 class NodeKind(IntEnum):
@@ -51,44 +53,6 @@ class NodeKind(IntEnum):
 
 
 NODE_KIND_NAMES: tuple[str, ...] = tuple(k.name.lower() for k in NodeKind)
-
-
-@dataclass(frozen=True)
-class TopologyConfig:
-    """GVD and node selection parameters (lengths in metres).
-
-    ``min_clearance``: robot radius; cells nearer an obstacle are not traversable.
-    ``free_thresh``: occupancy at or below which a cell is free (others, unknown included, are
-    obstacles). ``ridge_ratio``: minimum separation of the two nearest obstacle points, as a
-    fraction of the clearance, for a cell to be on the GVD (0.5: they subtend >= 29 deg).
-    ``spur_factor``, ``weak_spur_factor``, ``min_spur_length``: pruning (module doc).
-    ``merge_radius``: nodes closer than this are merged. ``dead_end_nodes``, ``region_nodes``:
-    enable the extras; ``arc_spacing``: maximum geodesic spacing of nodes along the GVD
-    (0 disables arc nodes).
-    ``min_region_area``: free regions smaller than this (m^2) get no region node.
-    """
-
-    min_clearance: float = 0.2
-    free_thresh: int = 25
-    ridge_ratio: float = 0.5
-    spur_factor: float = 1.5
-    weak_spur_factor: float = 2.0
-    min_spur_length: float = 0.5
-    merge_radius: float = 0.5
-    dead_end_nodes: bool = True
-    region_nodes: bool = True
-    arc_spacing: float = 2.5
-    min_region_area: float = 0.5
-
-    def __post_init__(self) -> None:
-        for name in ('min_clearance', 'ridge_ratio', 'spur_factor', 'weak_spur_factor',
-                     'min_spur_length', 'merge_radius', 'arc_spacing', 'min_region_area'):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f'TopologyConfig.{name}: expected a number >= 0, got {v!r}')
-        if not 0 <= self.free_thresh <= 100:
-            raise ValueError(f'TopologyConfig.free_thresh: expected 0..100, got '
-                             f'{self.free_thresh!r}')
 
 
 @dataclass(frozen=True, eq=False)
@@ -344,7 +308,6 @@ def _merge(cands: np.ndarray, score: np.ndarray, w: int, radius_cells: float) ->
     """Greedy merge: keep the highest-score candidate, drop others within the radius."""
     if cands.size <= 1 or radius_cells <= 0:
         return cands
-    from scipy.spatial import cKDTree
     order = np.argsort(-score, kind='stable')
     c = cands[order]
     pts = np.column_stack((c // w, c % w)).astype(float)
@@ -361,7 +324,6 @@ def _merge(cands: np.ndarray, score: np.ndarray, w: int, radius_cells: float) ->
 def _far_from(cands: np.ndarray, existing: list[int], w: int, radius_cells: float) -> np.ndarray:
     if cands.size == 0 or not existing or radius_cells <= 0:
         return cands
-    from scipy.spatial import cKDTree
     e = np.asarray(existing)
     tree = cKDTree(np.column_stack((e // w, e % w)).astype(float))
     d, _ = tree.query(np.column_stack((cands // w, cands % w)).astype(float))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..transforms import compose, inverse
 
@@ -150,7 +151,6 @@ def icp_point_to_line(ref: np.ndarray, ref_normals: np.ndarray, new: np.ndarray,
     if len(ref) < 3 or len(new) < 3:
         return pose, 0, math.inf
     if tree is None:
-        from scipy.spatial import cKDTree
         tree = cKDTree(ref)
     w_ref = np.ones(len(ref)) if ref_weights is None else np.asarray(ref_weights, float)
     gate = max_dist
@@ -192,7 +192,6 @@ def mutual_nn_procrustes(ref: np.ndarray, new: np.ndarray, pose, gate: float,
     ``gate`` (closed-form Procrustes, ``iterations`` times). Where both scans sample the same
     points this removes the along-wall freedom point-to-line ICP leaves. Returns
     ``(pose, n_pairs)``; the input pose if fewer than 3 pairs are found."""
-    from scipy.spatial import cKDTree
     pose = tuple(float(v) for v in pose)
     if len(ref) < 3 or len(new) < 3:
         return pose, 0

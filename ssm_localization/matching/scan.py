@@ -1,20 +1,15 @@
-"""Scan preprocessing for spectral scan matching (paper section II.A).
+"""Scan geometry for spectral scan matching (paper section II.A).
 
 ranges -> points (``ranges_to_points``), spatially even downsampling to a point budget
-(``downsample_even``), tangents (eq. 1, ``tangents``) and the per-scan features the matcher
-precomputes once (``ScanFeatures``, ``prepare_scan``).
+(``downsample_even``), tangents (eq. 1 ``tangents``, and the robust PCA form
+``robust_tangents``), PCA normals for ICP (``local_normals``). The per-scan features built from
+them live in ``features.py``.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
-from functools import cached_property
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .matcher import MatcherConfig
 
 
 def ranges_to_points(ranges, angle_min: float, angle_increment: float, range_min: float = 0.0,
@@ -256,85 +251,6 @@ def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
     return u
 
 
-@dataclass(frozen=True, eq=False)
-class ScanFeatures:
-    """What the matcher needs of one scan; plain numpy arrays (npz-friendly, no pickle).
-
-    ``points (N, 2)`` the downsampled points (scan frame), ``tangents (N, 2)`` (eq. 1),
-    ``descriptors (N, D)`` (rotation-invariant local descriptors, ``descriptors.py``),
-    ``source_index (N,)`` indices into the caller's point array; for the ICP refinement a denser
-    set ``fine_points (P, 2)`` with PCA ``fine_normals (P, 2)`` and ``fine_weights (P,)``. The
-    pairwise tables of eq. 2 (``dist``, ``angle``) are rebuilt lazily on first use and cached
-    (not stored).
-    """
-
-    points: np.ndarray
-    tangents: np.ndarray
-    descriptors: np.ndarray
-    source_index: np.ndarray
-    fine_points: np.ndarray
-    fine_normals: np.ndarray
-    fine_weights: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.points)
-
-    @property
-    def normals(self) -> np.ndarray:
-        """Left normals of the tangents (towards the sensor for a counterclockwise sweep)."""
-        return np.column_stack((-self.tangents[:, 1], self.tangents[:, 0]))
-
-    @cached_property
-    def is_degenerate(self) -> bool:
-        """Fewer than 3 points or (nearly) collinear points: the pose is not observable."""
-        if len(self.points) < 3:
-            return True
-        c = self.points - self.points.mean(axis=0)
-        s = np.linalg.svd(c, compute_uv=False)
-        return bool(s[1] < 1e-3 * max(s[0], 1e-12) or s[1] / math.sqrt(len(c)) < 1e-3)
-
-    @cached_property
-    def dist(self) -> np.ndarray:
-        """``d_ij`` of eq. 2, (N, N) float32."""
-        from .pairwise import distance_table
-        return distance_table(self.points)
-
-    @cached_property
-    def angle(self) -> np.ndarray:
-        """``theta_ij = arccos(u_i . u_j)`` of eq. 2, (N, N) float32."""
-        from .pairwise import angle_table
-        return angle_table(self.tangents)
-
-    @cached_property
-    def fine_tree(self):
-        """k-d tree (scipy ``cKDTree``) over ``fine_points`` for ICP, built on first use."""
-        from scipy.spatial import cKDTree
-        return cKDTree(self.fine_points)
-
-    def to_arrays(self, prefix: str = '') -> dict[str, np.ndarray]:
-        """The stored fields as ``{prefix + name: array}`` (for ``np.savez``)."""
-        return {prefix + f.name: np.asarray(getattr(self, f.name)) for f in fields(self)}
-
-    @classmethod
-    def from_arrays(cls, arrays, prefix: str = '') -> 'ScanFeatures':
-        """Inverse of ``to_arrays``; ``arrays`` is any mapping (e.g. an ``np.load`` result)."""
-        try:
-            vals = {f.name: np.asarray(arrays[prefix + f.name]) for f in fields(cls)}
-        except KeyError as exc:
-            raise ValueError(f'ScanFeatures: missing array {exc}') from None
-        n = len(vals['points'])
-        nf = len(vals['fine_points'])
-        if vals['points'].shape != (n, 2) or vals['tangents'].shape != (n, 2) \
-                or len(vals['descriptors']) != n or vals['source_index'].shape != (n,) \
-                or vals['fine_points'].shape != (nf, 2) or vals['fine_normals'].shape != (nf, 2) \
-                or vals['fine_weights'].shape != (nf,):
-            raise ValueError('ScanFeatures: inconsistent array shapes')
-        for name in ('points', 'tangents', 'fine_points', 'fine_normals', 'fine_weights'):
-            vals[name] = vals[name].astype(float)
-        vals['source_index'] = vals['source_index'].astype(np.int64)
-        return cls(**vals)
-
-
 def as_points(points_xy, name: str = 'points') -> np.ndarray:
     """Validate an (N, 2) array-like; raises ``ValueError`` naming ``name`` otherwise."""
     p = np.asarray(points_xy, dtype=float)
@@ -343,40 +259,3 @@ def as_points(points_xy, name: str = 'points') -> np.ndarray:
     if p.ndim != 2 or p.shape[1] != 2:
         raise ValueError(f'{name}: expected an (N, 2) array, got shape {p.shape}')
     return p
-
-
-def prepare_scan(points_xy, config: 'MatcherConfig | None' = None) -> ScanFeatures:
-    """Downsample, tangents (eq. 1) and descriptors of one scan (points in scan order, metres,
-    sensor at the origin).
-
-    Non-finite points are dropped; fewer than 3 points give features with ``is_degenerate``
-    (the matcher then returns an empty result). Three spatially even subsets are taken: the
-    matching points (``config.max_points``), a context set (``config.context_spacing``) for
-    tangents and descriptors, and the denser ICP set (``config.icp_max_points``).
-    """
-    from .descriptors import shape_context
-    if config is None:
-        from .matcher import MatcherConfig
-        config = MatcherConfig()
-    p = as_points(points_xy)
-    src = np.flatnonzero(np.isfinite(p).all(axis=1))
-    p = p[src]
-    keep = downsample_even(p, config.max_points, config.min_spacing)
-    pts = p[keep]
-    src = src[keep]
-    ctx = p[downsample_even(p, 4 * config.max_points, config.context_spacing)]
-    offsets = (ctx[None, :, 0] - pts[:, None, 0], ctx[None, :, 1] - pts[:, None, 1])
-    if config.tangent_method == 'eq1':
-        u = tangents(pts, config.gap, sweep_direction(p))
-    else:
-        # oriented geometrically (counterclockwise about the sensor): no scan order involved,
-        # so interleaved outliers or a clockwise scanner cannot flip it
-        u = robust_tangents(pts, ctx, config.tangent_radius, 1.0, offsets)
-    cw = length_weights(ctx, config.context_spacing, config.length_cap) \
-        if config.length_cap > 0 else None
-    desc = shape_context(pts, u, config.desc_radius, config.desc_radial_bins,
-                         config.desc_angular_bins, context=ctx, offsets=offsets, weights=cw)
-    fine = p[downsample_even(p, config.icp_max_points, config.icp_min_spacing)]
-    fn, fw = local_normals(fine, config.normal_radius)
-    return ScanFeatures(points=pts, tangents=u, descriptors=desc, source_index=src,
-                        fine_points=fine, fine_normals=fn, fine_weights=fw)

@@ -62,7 +62,7 @@ NODE_PARAMS: dict[str, tuple[Any, str]] = {
 
 def localizer_parameters() -> dict[str, tuple[Any, str]]:
     """Every global_localizer parameter: ``{name: (default, description)}``."""
-    from ssm_localization.localization.localizer import LocalizerConfig
+    from ssm_localization.config import LocalizerConfig
     index_params = {k: v for k, v in indexer_parameters().items() if k.startswith('index.')}
     return {**NODE_PARAMS, **LASER_PARAMS, **MAP_PARAMS, **index_params,
             **config_parameter_table('localizer', LocalizerConfig())}
@@ -124,8 +124,8 @@ class GlobalLocalizerNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('global_localizer', **kwargs)
-        from ssm_localization.mapping.index import IndexConfig
-        from ssm_localization.localization.localizer import LocalizerConfig
+        from ssm_localization.config import IndexConfig
+        from ssm_localization.config import LocalizerConfig
         values = declare_table(self, localizer_parameters(), dynamic=DYNAMIC)
         self.mode = str(values['mode'])
         if self.mode not in MODES:

@@ -192,7 +192,7 @@ MAP_PARAMS: dict[str, tuple[Any, str]] = {
 
 def indexer_parameters() -> dict[str, tuple[Any, str]]:
     """Every map_indexer parameter: ``{name: (default, description)}``."""
-    from ssm_localization.mapping.index import IndexConfig
+    from ssm_localization.config import IndexConfig
     return {'index_file': ('', 'write the index here (npz) after each build; empty = do not '
                                'write'),
             **LASER_PARAMS, **MAP_PARAMS, **config_parameter_table('index', IndexConfig())}
@@ -320,7 +320,7 @@ class MapIndexerNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('map_indexer', **kwargs)
-        from ssm_localization.mapping.index import IndexConfig
+        from ssm_localization.config import IndexConfig
         values = declare_table(self, indexer_parameters())
         self.laser_pose = laser_pose_of(values)
         self.index_config = build_config(IndexConfig, 'index', values, self.laser_pose)

@@ -42,7 +42,7 @@ def _point(x: float, y: float, z: float = 0.0) -> Point:
 def kind_name(kind: Any) -> str:
     """A node kind as a name (``index.NODE_KIND_NAMES`` for integer codes)."""
     if isinstance(kind, (int, np.integer)) and not isinstance(kind, bool):
-        from ssm_localization.mapping.index import NODE_KIND_NAMES
+        from ssm_localization.mapping.topology import NODE_KIND_NAMES
         if 0 <= int(kind) < len(NODE_KIND_NAMES):
             return NODE_KIND_NAMES[int(kind)]
     return str(kind).lower()

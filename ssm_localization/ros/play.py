@@ -168,7 +168,7 @@ def play_bag(bag: str | Path, rate: float = 1.0, loop: bool = False,
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    from ssm_localization.io.bags import read_bag
+    from ssm_localization.io.bag_reader import read_bag
     data = read_bag(bag, scan_topic=_norm(scan_topic), require_scans=False)
     grid, items = timeline(data, scan_topic, topics, start_offset, duration)
     if grid is None and not items:

@@ -1,0 +1,225 @@
+"""Reading rosbag2 bags (mcap storage, ROS 2 Jazzy definitions) with ``rosbags``.
+
+A bag path is a rosbag2 directory (with ``metadata.yaml``), a directory holding one ``.mcap``
+file, or a bare ``.mcap`` file. Topics and records: see ``bag_records``. A bag cut short mid-file
+yields its readable prefix (read with the ``mcap`` stream reader) and a ``RuntimeWarning``.
+"""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..mapping.map_io import OccupancyMap, occupancy_map_from_msg
+from ..progress import ProgressCallback
+from ..transforms import Pose2, quaternion_to_yaw
+from .bag_records import (GT_TOPIC, MAP_TOPIC, ODOM_TOPIC, SCAN_TOPIC, SCAN_TYPE, BagData,
+                          BagError, ScanRecord, typestore)
+
+
+def _stamp_of(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def _pose_of(pose_msg) -> Pose2:
+    q = pose_msg.orientation
+    return (float(pose_msg.position.x), float(pose_msg.position.y),
+            quaternion_to_yaw(q.x, q.y, q.z, q.w))
+
+
+def _resolve(path: str | Path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f'bag not found: {path}')
+    if path.is_dir() and not (path / 'metadata.yaml').exists():
+        mcaps = sorted(path.glob('*.mcap'))
+        if len(mcaps) != 1:
+            raise BagError(f'{path}: not a rosbag2 directory (no metadata.yaml) and holds '
+                           f'{len(mcaps)} .mcap files')
+        return mcaps[0]
+    if path.is_file() and path.suffix != '.mcap':
+        raise BagError(f'{path}: expected a rosbag2 directory or a .mcap file')
+    return path
+
+
+def _mcap_prefix(path: Path) -> tuple[list[tuple[str, str, bytes]], str]:
+    """The messages readable from the start of an mcap file cut short (via the ``mcap`` stream
+    reader), and why reading stopped."""
+    from mcap import records, stream_reader
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, str]] = {}
+    out: list[tuple[str, str, bytes]] = []
+    reason = 'end of file'
+    try:
+        with path.open('rb') as fh:
+            for rec in stream_reader.StreamReader(fh, record_size_limit=2**30).records:
+                if isinstance(rec, records.Schema):
+                    schemas[rec.id] = rec.name
+                elif isinstance(rec, records.Channel):
+                    channels[rec.id] = (rec.topic, schemas.get(rec.schema_id, ''))
+                elif isinstance(rec, records.Message) and rec.channel_id in channels:
+                    out.append((*channels[rec.channel_id], bytes(rec.data)))
+    except Exception as exc:  # the truncation point: any decoding error ends the prefix
+        reason = (f'{type(exc).__name__}: {exc}' if str(exc).strip()
+                  else f'the file ends inside a record ({type(exc).__name__})')
+    return out, reason
+
+
+class _Reader:
+    """Opens a bag with clear errors; iterates (topic, msg) in log-time order.
+
+    An mcap file cut short (no summary, e.g. a recorder that crashed) is read up to the
+    truncation point with a ``RuntimeWarning``; one with nothing readable raises ``BagError``.
+    """
+
+    def __init__(self, path: str | Path):
+        from rosbags.highlevel import AnyReader
+        self.path = _resolve(path)
+        self.reader = None
+        self.prefix: list[tuple[str, str, bytes]] | None = None
+        try:
+            self.reader = AnyReader([self.path], default_typestore=typestore())
+            self.reader.open()
+        except FileNotFoundError:
+            raise FileNotFoundError(f'bag not found: {path}') from None
+        except Exception as exc:   # rosbags raises several error types for corrupt files
+            self.reader = None
+            self._open_prefix(path, f'{type(exc).__name__}: {exc}')
+        self.counts: dict[str, int] = {}
+        if self.reader is not None:
+            for c in self.reader.connections:
+                self.counts[c.topic] = self.counts.get(c.topic, 0) + c.msgcount
+            self.types = {c.topic: c.msgtype for c in self.reader.connections}
+        else:
+            self.types = {}
+            for topic, msgtype, _ in self.prefix:
+                self.counts[topic] = self.counts.get(topic, 0) + 1
+                self.types[topic] = msgtype
+
+    def _open_prefix(self, path, error: str) -> None:
+        mcap = self.path if self.path.is_file() else next(iter(sorted(self.path.glob('*.mcap'))),
+                                                         None)
+        prefix, reason = _mcap_prefix(mcap) if mcap is not None else ([], 'no .mcap file')
+        if not prefix:
+            raise BagError(f'{path}: cannot read bag, truncated or corrupt ({error}; {reason})')
+        warnings.warn(f'{path}: bag is truncated or corrupt ({error}); using the {len(prefix)} '
+                      f'messages readable before the damage ({reason})', RuntimeWarning,
+                      stacklevel=4)
+        self.prefix = prefix
+
+    def close(self) -> None:
+        if self.reader is not None:
+            self.reader.close()
+
+    def check_topic(self, topic: str, msgtype: str) -> None:
+        if topic not in self.types:
+            have = ', '.join(sorted(self.types)) or 'none'
+            raise BagError(f'{self.path}: no {topic} topic in the bag (topics: {have})')
+        if self.types[topic] != msgtype:
+            raise BagError(f'{self.path}: {topic} has type {self.types[topic]}, expected {msgtype}')
+
+    def messages(self, topics: set[str]) -> Iterator[tuple[str, object]]:
+        if self.prefix is not None:
+            ts = typestore()
+            for topic, msgtype, raw in self.prefix:
+                if topic in topics:
+                    try:
+                        yield topic, ts.deserialize_cdr(raw, msgtype)
+                    except Exception as exc:
+                        raise BagError(f'{self.path}: cannot decode a {topic} message '
+                                       f'({type(exc).__name__}: {exc})') from None
+            return
+        conns = [c for c in self.reader.connections if c.topic in topics]
+        it = self.reader.messages(connections=conns)
+        n = 0
+        while True:
+            try:
+                conn, _, raw = next(it)
+                msg = self.reader.deserialize(raw, conn.msgtype)
+            except StopIteration:
+                return
+            except Exception as exc:
+                warnings.warn(f'{self.path}: bag is truncated or corrupt after {n} messages '
+                              f'({type(exc).__name__}: {exc}); using the readable part',
+                              RuntimeWarning, stacklevel=3)
+                return
+            n += 1
+            yield conn.topic, msg
+
+
+def _scan_record(msg) -> ScanRecord:
+    return ScanRecord(stamp=_stamp_of(msg.header), ranges=np.asarray(msg.ranges, dtype=np.float32),
+                      angle_min=float(msg.angle_min), angle_max=float(msg.angle_max),
+                      angle_increment=float(msg.angle_increment),
+                      time_increment=float(msg.time_increment), scan_time=float(msg.scan_time),
+                      range_min=float(msg.range_min), range_max=float(msg.range_max),
+                      frame_id=str(msg.header.frame_id))
+
+
+def _map_from_msg(msg) -> OccupancyMap:
+    """OccupancyGrid -> OccupancyMap; the float32 resolution is restored to its shortest decimal
+    (0.05, not 0.0500000007) so the map equals (and checksums like) the YAML it was made from."""
+    m = occupancy_map_from_msg(msg)
+    res = float(repr(np.float32(m.resolution)).removeprefix('np.float32(').rstrip(')'))
+    return OccupancyMap(m.data, res, m.origin, m.frame_id)
+
+
+def _progress_step(progress, n: int, total: int) -> None:
+    if progress is not None and (n % 50 == 0 or n == total):
+        progress(n, total, 'reading bag')
+
+
+def iter_scans(path: str | Path, scan_topic: str = SCAN_TOPIC,
+               progress: ProgressCallback | None = None) -> Iterator[ScanRecord]:
+    """Yield the scans of a bag one by one, in bag order (constant memory)."""
+    rd = _Reader(path)
+    try:
+        rd.check_topic(scan_topic, SCAN_TYPE)
+        total = rd.counts.get(scan_topic, 0)
+        for n, (_, msg) in enumerate(rd.messages({scan_topic}), 1):
+            _progress_step(progress, n, total)
+            yield _scan_record(msg)
+    finally:
+        rd.close()
+
+
+def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
+             progress: ProgressCallback | None = None, require_scans: bool = True) -> BagData:
+    """Read a whole bag: the first /map, every scan, /ground_truth and /odom poses.
+
+    Raises ``FileNotFoundError`` for a missing path, ``BagError`` (a ``ValueError``) for a bag
+    that cannot be opened or lacks ``scan_topic`` (unless ``require_scans=False``). A bag cut
+    short mid-file yields its readable prefix with a ``RuntimeWarning``.
+    """
+    rd = _Reader(path)
+    try:
+        if require_scans:
+            rd.check_topic(scan_topic, SCAN_TYPE)
+        topics = {scan_topic, MAP_TOPIC, GT_TOPIC, ODOM_TOPIC}
+        total = sum(rd.counts.get(t, 0) for t in topics)
+        occ_map, scans, gt, od = None, [], {}, {}
+        for n, (topic, msg) in enumerate(rd.messages(topics), 1):
+            if topic == scan_topic:
+                scans.append(_scan_record(msg))
+            elif topic == MAP_TOPIC and occ_map is None:
+                occ_map = _map_from_msg(msg)
+            elif topic == GT_TOPIC:
+                gt[_stamp_of(msg.header)] = _pose_of(msg.pose)
+            elif topic == ODOM_TOPIC:
+                od[_stamp_of(msg.header)] = _pose_of(msg.pose.pose)
+            _progress_step(progress, n, total)
+        return BagData(map=occ_map, scans=scans, ground_truth=gt, odom=od,
+                       topic_counts=dict(rd.counts))
+    finally:
+        rd.close()
+
+
+def bag_topics(path: str | Path) -> dict[str, int]:
+    """Message count per topic (from the bag's metadata / summary)."""
+    rd = _Reader(path)
+    try:
+        return dict(rd.counts)
+    finally:
+        rd.close()
