@@ -14,6 +14,7 @@ pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
 from sensor_msgs.msg import LaserScan  # noqa: E402
 from visualization_msgs.msg import Marker  # noqa: E402
 
+from ssm_localization import occupancy_map_from_msg  # noqa: E402
 from ssm_localization.ros import conversions as conv  # noqa: E402
 from ssm_localization.ros import markers  # noqa: E402
 
@@ -55,11 +56,11 @@ def test_map_round_trip():
     grid = conv.occupancy_grid_from_map(occ, 3.5)
     assert (grid.info.width, grid.info.height) == (occ.width, occ.height)
     assert grid.header.frame_id == 'map' and grid.header.stamp.sec == 3
-    back = conv.occupancy_map_from_msg(grid)
+    back = occupancy_map_from_msg(grid)
     np.testing.assert_array_equal(back.data, occ.data)
     assert back.checksum() == occ.checksum()
     rotated = OccupancyMap(np.zeros((4, 6), np.int8), 0.1, (1.0, -2.0, 0.5), 'world')
-    back = conv.occupancy_map_from_msg(conv.occupancy_grid_from_map(rotated))
+    back = occupancy_map_from_msg(conv.occupancy_grid_from_map(rotated))
     assert back.frame_id == 'world'
     np.testing.assert_allclose(back.origin, (1.0, -2.0, 0.5), atol=1e-9)
 
@@ -70,7 +71,7 @@ def test_malformed_grid_raises_value_error():
     grid.info.width, grid.info.height, grid.info.resolution = 10, 10, 0.05
     grid.data = [0] * 99
     with pytest.raises(ValueError):
-        conv.occupancy_map_from_msg(grid)
+        occupancy_map_from_msg(grid)
 
 
 def test_pose_with_covariance():

@@ -24,7 +24,7 @@ from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from ssm_localization.ros.conversions import pose_from_msg, stamp_to_sec  # noqa: E402
-from ssm_localization.ros.map_indexer import LATCHED_QOS  # noqa: E402
+from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
 from ssm_localization.transforms import wrap_angle  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]

@@ -22,7 +22,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from ssm_localization.ros.conversions import (laser_scan_from_record,  # noqa: E402
                                               occupancy_grid_from_map, pose_from_msg,
                                               stamp_to_sec)
-from ssm_localization.ros.map_indexer import LATCHED_QOS  # noqa: E402
+from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
 from ssm_localization.transforms import wrap_angle  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -135,9 +135,9 @@ def test_map_indexer_markers_index_file_and_newest_map_wins(ros, tmp_path):
 
 
 def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
-    import ssm_localization.mapping.index as index_mod
+    from ssm_localization.ros import map_indexer
     from ssm_localization.ros.map_indexer import MapIndexerNode
-    real_build = index_mod.build_index
+    real_build = map_indexer.build_index
     started = []
 
     def slow_build(occ, config=None, progress=None):
@@ -146,7 +146,7 @@ def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
             time.sleep(0.1)
             progress(i, 100, 'slow test build')
         return real_build(occ, config, progress)
-    monkeypatch.setattr(index_mod, 'build_index', slow_build)
+    monkeypatch.setattr(map_indexer, 'build_index', slow_build)
     node = ros.add(MapIndexerNode(context=ros.context))
     got = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
     pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
@@ -254,8 +254,8 @@ def test_localizer_service_bad_input_and_kidnapping(ros, capfd):
 
 def test_service_answers_while_indexing(ros, monkeypatch):
     """A relocalize call during indexing fails at once with 'indexing in progress'."""
-    import ssm_localization.mapping.index as index_mod
-    real_build = index_mod.build_index
+    from ssm_localization.ros import global_localizer
+    real_build = global_localizer.build_index
 
     def slow_build(occ, config=None, progress=None):     # a big map, deterministically
         for i in range(20):
@@ -263,7 +263,7 @@ def test_service_answers_while_indexing(ros, monkeypatch):
             if progress is not None:
                 progress(i, 100, 'slow test build')
         return real_build(occ, config, progress)
-    monkeypatch.setattr(index_mod, 'build_index', slow_build)
+    monkeypatch.setattr(global_localizer, 'build_index', slow_build)
     loc = Localizer(ros)
     loc.publish_map(synthetic_map(0))
     assert ros.wait_for(lambda: loc.node.builder.busy, 10)

@@ -42,11 +42,9 @@ def _close(ctx, node) -> None:
 
 
 def test_params_file_is_current():
-    from ssm_localization.ros.global_localizer import params_yaml
+    from ssm_localization.ros.parameters import params_yaml
     assert PARAMS.read_text() == params_yaml(), (
-        'config/ssm_localization.yaml is stale; regenerate it with: .venv/bin/python -c "from '
-        'ssm_localization.ros.global_localizer import params_yaml; print(params_yaml(), end=\'\')"'
-        ' > config/ssm_localization.yaml')
+        'config/ssm_localization.yaml is stale; regenerate it with: make params-yaml')
 
 
 @pytest.mark.parametrize('node_name', ['global_localizer', 'map_indexer'])

@@ -17,7 +17,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data  # 
 from sensor_msgs.msg import LaserScan  # noqa: E402
 
 from ssm_localization.ros.conversions import stamp_to_sec  # noqa: E402
-from ssm_localization.ros.map_indexer import LATCHED_QOS  # noqa: E402
+from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
 from ssm_localization.ros.play import BagPlayer, timeline  # noqa: E402
 
 pytestmark = pytest.mark.ros

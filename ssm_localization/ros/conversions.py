@@ -1,6 +1,7 @@
 """Conversions between ROS 2 messages and the ROS-free core types.
 
-LaserScan -> ``localize_scan`` arguments, OccupancyGrid <-> :class:`OccupancyMap`,
+LaserScan -> ``localize_scan`` arguments, :class:`OccupancyMap` -> OccupancyGrid (the other way is
+the core's duck-typed ``mapping.map_io.occupancy_map_from_msg``),
 ``Localization`` -> PoseWithCovarianceStamped, ``ScanRecord`` -> LaserScan, poses -> PoseStamped.
 Everything here is a plain function of its inputs (no node, no I/O).
 """
@@ -102,12 +103,6 @@ def stamp_to_sec(stamp: Any) -> float:
 
 
 # --- maps --------------------------------------------------------------------------------------
-
-def occupancy_map_from_msg(msg: OccupancyGrid):
-    """OccupancyGrid -> OccupancyMap (delegates to ``map_io``; raises ValueError when malformed)."""
-    from ssm_localization.mapping import map_io
-    return map_io.occupancy_map_from_msg(msg)
-
 
 def occupancy_grid_from_map(occ_map, stamp: Any = 0, frame_id: str | None = None) -> OccupancyGrid:
     """OccupancyMap -> OccupancyGrid (row 0 = bottom row, as both use)."""

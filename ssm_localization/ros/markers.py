@@ -13,8 +13,9 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ssm_localization.mapping.topology import NODE_KIND_NAMES
 from ssm_localization.ros.conversions import pose_msg, time_msg
-from ssm_localization.transforms import apply
+from ssm_localization.transforms import apply, compose
 
 # Node kind -> RGB; kinds the topology module uses are matched by name (case-insensitive
 # substring), anything else gets a palette color by its rank among the kinds present.
@@ -40,9 +41,8 @@ def _point(x: float, y: float, z: float = 0.0) -> Point:
 
 
 def kind_name(kind: Any) -> str:
-    """A node kind as a name (``index.NODE_KIND_NAMES`` for integer codes)."""
+    """A node kind as a name (``mapping.topology.NODE_KIND_NAMES`` for integer codes)."""
     if isinstance(kind, (int, np.integer)) and not isinstance(kind, bool):
-        from ssm_localization.mapping.topology import NODE_KIND_NAMES
         if 0 <= int(kind) < len(NODE_KIND_NAMES):
             return NODE_KIND_NAMES[int(kind)]
     return str(kind).lower()
@@ -169,7 +169,6 @@ def localization_markers(localization, frame_id: str, stamp: Any = 0, top_n: int
     pose = getattr(localization, 'pose', None)
     if scan_xy_laser is not None and len(scan_xy_laser) and pose is not None \
             and np.all(np.isfinite(np.asarray(pose, dtype=float))):
-        from ssm_localization.transforms import compose
         pts = apply(compose(pose, laser_pose), np.asarray(scan_xy_laser, dtype=float))
         if len(pts) > max_scan_points:
             pts = pts[np.linspace(0, len(pts) - 1, max_scan_points).astype(int)]

@@ -1,6 +1,6 @@
 """Publish a bag's topics on live ROS topics (a small ``ros2 bag play`` for our bags).
 
-The bag is read with :mod:`ssm_localization.bags`; ``/map`` is published once, first, reliable +
+The bag is read with :mod:`ssm_localization.io.bag_reader`; ``/map`` is published once, first, reliable +
 transient-local (latched); ``/scan`` (reliable, so sensor-data and reliable subscribers both
 match), ``/ground_truth`` and ``/odom`` follow in timestamp order at ``rate`` times real time
 (0 = as fast as possible). Topic names are published relative (``scan``), so a namespace or
@@ -14,15 +14,19 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import numpy as np
+import rclpy
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 
+from ssm_localization.io.bag_reader import read_bag
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_msg, pose_stamped, time_msg)
-from ssm_localization.ros.map_indexer import LATCHED_QOS
+from ssm_localization.ros.qos import LATCHED_QOS
 
 STREAM_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -154,8 +158,7 @@ class BagPlayer(Node):
                 pass
 
 
-def _duration(seconds: float):
-    from rclpy.duration import Duration
+def _duration(seconds: float) -> Duration:
     return Duration(nanoseconds=int(seconds * 1e9))
 
 
@@ -165,10 +168,6 @@ def play_bag(bag: str | Path, rate: float = 1.0, loop: bool = False,
              wait_subscribers: float = 0.0, hold: float = 0.0,
              ros_args: list[str] | None = None) -> int:
     """Read ``bag`` and publish it (initialises and shuts down rclpy); return an exit code."""
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-
-    from ssm_localization.io.bag_reader import read_bag
     data = read_bag(bag, scan_topic=_norm(scan_topic), require_scans=False)
     grid, items = timeline(data, scan_topic, topics, start_offset, duration)
     if grid is None and not items:
