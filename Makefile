@@ -48,7 +48,7 @@ colcon-check: $(STAMP)
 	test -f install/colcon/ssm_localization/share/ament_index/resource_index/packages/ssm_localization
 
 params-yaml: $(STAMP)
-	$(BIN)/python -c "from ssm_localization.ros.parameters import params_yaml; print(params_yaml(), end='')" > config/ssm_localization.yaml
+	$(BIN)/python -m ssm_localization.ros.parameters config/ssm_localization.yaml docs/PARAMETERS.md
 
 clean:
 	rm -rf $(VENV) build install log $(OUT) *.egg-info

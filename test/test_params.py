@@ -8,8 +8,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ssm_localization.config import (IndexConfig, LocalizerConfig, MatcherConfig, flatten,
-                                     from_dict, load_configs, unflatten)
+from ssm_localization.config import (LEARNED_WEIGHTS, IndexConfig, LocalizerConfig,
+                                     MapBuildConfig, MatcherConfig, SimulationConfig,
+                                     TopologyConfig, flatten, from_dict, load_configs, unflatten)
+from ssm_localization.config.fields import help_of
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -174,3 +176,17 @@ def test_repository_params_file_loads():
         assert (list(got) if isinstance(got, tuple) else got) == pytest.approx(value) \
             if not isinstance(value, str) else got == value, key
     assert loc_cfg.laser_pose == (section['laser_x'], section['laser_y'], section['laser_yaw'])
+
+
+@pytest.mark.parametrize('cls', [IndexConfig, TopologyConfig, MatcherConfig, LocalizerConfig,
+                                 MapBuildConfig, SimulationConfig])
+def test_every_config_field_has_help(cls):
+    """``param(default, help)``: the one source of the ROS parameter descriptions and the docs."""
+    missing = [f.name for f in dataclasses.fields(cls) if not f.metadata.get('help')]
+    assert not missing, f'{cls.__name__} fields without help metadata: {missing}'
+
+
+def test_help_metadata_keeps_the_defaults():
+    assert help_of(MatcherConfig)['weights'].startswith('logistic weights')
+    assert MatcherConfig().weights == LEARNED_WEIGHTS and IndexConfig().beams == 360
+    assert IndexConfig().topology == TopologyConfig() and IndexConfig().matcher == MatcherConfig()

@@ -13,6 +13,7 @@ import rclpy  # noqa: E402
 pytestmark = pytest.mark.ros
 
 PARAMS = REPO / 'config' / 'ssm_localization.yaml'
+DOCS = REPO / 'docs' / 'PARAMETERS.md'
 AUTO = {'use_sim_time', 'start_type_description_service'}   # declared by rclpy itself
 
 
@@ -41,10 +42,35 @@ def _close(ctx, node) -> None:
     rclpy.try_shutdown(context=ctx)
 
 
-def test_params_file_is_current():
-    from ssm_localization.ros.parameters import params_yaml
+def test_params_file_and_parameter_docs_are_current():
+    from ssm_localization.ros.parameters import parameters_markdown, params_yaml
     assert PARAMS.read_text() == params_yaml(), (
         'config/ssm_localization.yaml is stale; regenerate it with: make params-yaml')
+    assert DOCS.read_text() == parameters_markdown(), (
+        'docs/PARAMETERS.md is stale; regenerate it with: make params-yaml')
+
+
+def test_parameter_docs_describe_every_parameter_of_both_nodes():
+    from ssm_localization.ros.parameters import indexer_parameters, localizer_parameters
+    text = DOCS.read_text()
+    for table in (localizer_parameters(), indexer_parameters()):
+        for name, (_, desc) in table.items():
+            assert desc, f'{name} has no description'
+            assert f'| `{name}` |' in text, name
+
+
+def test_a_config_field_without_help_has_no_description(monkeypatch):
+    """The parameter tables take descriptions from ``param(..., help)`` only: no generic text."""
+    import dataclasses
+
+    from ssm_localization.config import LocalizerConfig
+    from ssm_localization.ros import parameters
+    plain = dataclasses.make_dataclass('Plain', [('top_n', int, dataclasses.field(default=3))],
+                                       frozen=True)
+    table = parameters.config_parameter_table('localizer', plain())
+    assert table == {'localizer.top_n': (3, '')}
+    described = parameters.config_parameter_table('localizer', LocalizerConfig())
+    assert all(desc for _, desc in described.values())
 
 
 @pytest.mark.parametrize('node_name', ['global_localizer', 'map_indexer'])

@@ -5,7 +5,7 @@ import argparse
 
 from ..config.mapping import MapBuildConfig
 from ..io.carmen import convert_carmen
-from ..progress import ProgressBar
+from ..progress import TqdmProgress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,9 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.resolution <= 0 or args.every < 1 or (args.max_scans or 1) < 1:
         raise ValueError('--resolution must be > 0, --every and --max-scans >= 1')
-    bar = ProgressBar(1, 'convert', enabled=not args.quiet)
     try:
-        res = _convert(args, bar)
+        with TqdmProgress('convert', enabled=not args.quiet) as bar:
+            res = _convert(args, bar)
     except FileExistsError as exc:   # the dispatcher reports ValueErrors as one clean line
         raise ValueError(str(exc)) from None
     h, w = res.map_shape

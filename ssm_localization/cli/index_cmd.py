@@ -8,7 +8,7 @@ from ..config.params import load_index_config
 from ..evaluation.plotting import plot_index
 from ..mapping.index import build_index, save_index
 from ..mapping.map_io import load_map_yaml
-from ..progress import ProgressBar
+from ..progress import TqdmProgress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,9 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     config = load_index_config(args.params) if args.params else None
     occ_map = load_map_yaml(args.map)
-    bar = ProgressBar(1, 'index', enabled=not args.quiet)
     t0 = time.perf_counter()
-    index = build_index(occ_map, config, progress=bar)
+    with TqdmProgress('index', enabled=not args.quiet) as bar:
+        index = build_index(occ_map, config, progress=bar)
     elapsed = time.perf_counter() - t0
     path = save_index(index, args.output)
     kinds = ', '.join(f'{name} {n}' for name, n in index.kind_counts().items())

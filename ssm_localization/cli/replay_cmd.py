@@ -11,7 +11,7 @@ from ..io.bag_reader import read_bag
 from ..localization.localizer import GlobalLocalizer
 from ..mapping.index import build_index, load_index
 from ..mapping.map_io import load_map_yaml
-from ..progress import ProgressBar
+from ..progress import TqdmProgress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
         if grid is None:
             raise ValueError(f'{args.bag}: no /map message; pass --map or --index')
         t0 = time.perf_counter()
-        index = build_index(grid, index_cfg, progress=ProgressBar(1, 'index', enabled=not args.quiet))
+        with TqdmProgress('index', enabled=not args.quiet) as bar:
+            index = build_index(grid, index_cfg, progress=bar)
         print(f'indexed map: {len(index.features)} nodes in {time.perf_counter() - t0:.2f} s')
     localizer = GlobalLocalizer(index, loc_cfg)
     scans = bag.scans[:args.limit] if args.limit > 0 else bag.scans

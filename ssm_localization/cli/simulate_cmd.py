@@ -7,7 +7,7 @@ from pathlib import Path
 from ..config.simulation import SimulationConfig
 from ..io.simulate import simulate_bag
 from ..mapping.map_io import load_map_yaml
-from ..progress import ProgressBar
+from ..progress import TqdmProgress
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     if Path(args.out).exists() and not args.force:
         raise ValueError(f'bag exists already (use --force to overwrite): {args.out}')
     occ_map = load_map_yaml(args.map)
-    sim = simulate_bag(occ_map, args.out, cfg, overwrite=args.force,
-                       progress=ProgressBar(cfg.count, 'simulate', enabled=not args.quiet))
+    with TqdmProgress('simulate', enabled=not args.quiet) as bar:
+        sim = simulate_bag(occ_map, args.out, cfg, overwrite=args.force, progress=bar)
     print(f'bag: {args.out} ({len(sim.scans)} scans, {cfg.beams} beams, fov {cfg.fov_deg:g} deg)')
     return 0

@@ -2,37 +2,39 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
+from .fields import param
 from .matcher import MatcherConfig
 
 
 @dataclass(frozen=True)
 class TopologyConfig:
-    """GVD and node selection parameters (lengths in metres).
+    """GVD and node selection (lengths in metres; the algorithm: ``mapping/topology.py``)."""
 
-    ``min_clearance``: robot radius; cells nearer an obstacle are not traversable.
-    ``free_thresh``: occupancy at or below which a cell is free (others, unknown included, are
-    obstacles). ``ridge_ratio``: minimum separation of the two nearest obstacle points, as a
-    fraction of the clearance, for a cell to be on the GVD (0.5: they subtend >= 29 deg).
-    ``spur_factor``, ``weak_spur_factor``, ``min_spur_length``: pruning (module doc).
-    ``merge_radius``: nodes closer than this are merged. ``dead_end_nodes``, ``region_nodes``:
-    enable the extras; ``arc_spacing``: maximum geodesic spacing of nodes along the GVD
-    (0 disables arc nodes).
-    ``min_region_area``: free regions smaller than this (m^2) get no region node.
-    """
-
-    min_clearance: float = 0.2
-    free_thresh: int = 25
-    ridge_ratio: float = 0.5
-    spur_factor: float = 1.5
-    weak_spur_factor: float = 2.0
-    min_spur_length: float = 0.5
-    merge_radius: float = 0.5
-    dead_end_nodes: bool = True
-    region_nodes: bool = True
-    arc_spacing: float = 2.5
-    min_region_area: float = 0.5
+    min_clearance: float = param(
+        0.2, 'robot radius, metres: cells nearer an obstacle are not traversable')
+    free_thresh: int = param(
+        25, 'occupancy at or below which a cell is free (others, unknown included, are obstacles)')
+    ridge_ratio: float = param(
+        0.5,
+        'minimum separation of the two nearest obstacle points, as a fraction of the clearance, '
+        'for a cell to be on the GVD (0.5: they subtend >= 29 deg)')
+    spur_factor: float = param(
+        1.5,
+        'terminal GVD arcs (spurs) shorter than this times the clearance of their junction are '
+        'pruned')
+    weak_spur_factor: float = param(
+        2.0, 'spur_factor is multiplied by this for weak arcs (wall noise)')
+    min_spur_length: float = param(
+        0.5, 'spurs and skeleton pieces shorter than this are pruned, metres')
+    merge_radius: float = param(0.5, 'nodes closer than this are merged, metres')
+    dead_end_nodes: bool = param(True, 'add nodes at the dead ends of GVD arcs')
+    region_nodes: bool = param(
+        True, 'add one node to every GVD component / free region without a node')
+    arc_spacing: float = param(
+        2.5, 'maximum geodesic spacing of nodes along the GVD, metres (0 disables arc nodes)')
+    min_region_area: float = param(0.5, 'free regions smaller than this (m^2) get no region node')
 
     def __post_init__(self) -> None:
         for name in ('min_clearance', 'ridge_ratio', 'spur_factor', 'weak_spur_factor',
@@ -47,17 +49,21 @@ class TopologyConfig:
 
 @dataclass(frozen=True)
 class IndexConfig:
-    """Index parameters. ``beams`` virtual beams over 360 deg from -pi counterclockwise,
-    ``max_range`` (m) of the virtual laser, ``sensor_pose`` (x, y, yaw) of the laser on the robot
-    (Table 1: x_sens, y_sens, theta_sens), ``occupied_thresh``: occupancy at or above which a cell
-    stops a beam (unknown cells do not)."""
+    """Index parameters. The ``beams`` virtual beams cover 360 deg from -pi counterclockwise."""
 
-    topology: TopologyConfig = field(default_factory=TopologyConfig)
-    beams: int = 360
-    max_range: float = 20.0
-    sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    occupied_thresh: int = 65
-    matcher: MatcherConfig = field(default_factory=MatcherConfig)
+    topology: TopologyConfig = param(
+        help='GVD and node selection (TopologyConfig)', default_factory=TopologyConfig)
+    beams: int = param(360, 'beams of each virtual scan taken at a topological node (full turn)')
+    max_range: float = param(20.0, 'range of the virtual laser when casting the node scans, metres')
+    sensor_pose: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0),
+        "the laser's pose on the robot (x, y, yaw; Table 1: x_sens, y_sens, theta_sens); the "
+        'nodes set it from laser_x/laser_y/laser_yaw')
+    occupied_thresh: int = param(
+        65, 'occupancy at or above which a cell stops a virtual beam (unknown cells do not)')
+    matcher: MatcherConfig = param(
+        help='scan matcher settings (MatcherConfig); the localizer matches with these too',
+        default_factory=MatcherConfig)
 
     def __post_init__(self) -> None:
         if not isinstance(self.beams, int) or isinstance(self.beams, bool) or self.beams < 8:
@@ -80,10 +86,10 @@ class IndexConfig:
 class MapBuildConfig:
     """Occupancy-grid building from scans at known poses (hit / miss counting)."""
 
-    resolution: float = 0.05
-    margin: float = 1.0            # metres of unknown border around the observed area
-    max_range: float = 40.0        # finite readings beyond this only clear space up to it
-    free_cap: float = 5.0          # no-return beams clear space up to this distance
-    occupied_ratio: float = 0.3    # occupied if hits >= ratio * (hits + misses)
-    min_hits: int = 1
-    chunk_beams: int = 20000       # beams traversed per vectorized batch
+    resolution: float = param(0.05, 'cell size of the map, metres')
+    margin: float = param(1.0, 'unknown border around the observed area, metres')
+    max_range: float = param(40.0, 'finite readings beyond this (metres) only clear space up to it')
+    free_cap: float = param(5.0, 'no-return beams clear space up to this distance, metres')
+    occupied_ratio: float = param(0.3, 'occupied if hits >= ratio * (hits + misses)')
+    min_hits: int = param(1, 'a cell with fewer hits is never occupied')
+    chunk_beams: int = param(20000, 'beams traversed per vectorized batch')

@@ -4,26 +4,33 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .fields import param
+
 
 @dataclass(frozen=True)
 class SimulationConfig:
     """How to simulate query scans (lengths in metres, angles in degrees where named so)."""
 
-    count: int = 50
-    beams: int = 360
-    fov_deg: float = 360.0            # centred on the sensor's x axis
-    max_range: float = 30.0           # no hit within it -> +inf
-    range_min: float = 0.05
-    noise_sigma: float = 0.01         # Gaussian range noise
-    clearance: float = 0.3            # minimum distance from the base to non-free cells
-    clutter: int = 0                  # unmapped discs per scan
-    clutter_radius: tuple[float, float] = (0.1, 0.3)
-    clutter_distance: tuple[float, float] = (1.0, 4.0)   # disc centre from the sensor
-    short_fraction: float = 0.0       # fraction of beams replaced by a random shorter reading
-    sensor_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)  # laser pose on the base
-    seed: int = 0
-    stamp0: float = 1.0
-    period: float = 0.1
+    count: int = param(50, 'number of scans')
+    beams: int = param(360, 'beams per scan')
+    fov_deg: float = param(
+        360.0, "field of view, degrees, centred on the sensor's x axis")
+    max_range: float = param(30.0, 'range of the simulated laser, metres (no hit: +inf)')
+    range_min: float = param(0.05, 'shortest reading of the simulated laser, metres')
+    noise_sigma: float = param(0.01, 'Gaussian range noise (sigma), metres')
+    clearance: float = param(
+        0.3, 'minimum distance from the base to non-free cells, metres')
+    clutter: int = param(0, 'unmapped discs near the robot per scan')
+    clutter_radius: tuple[float, float] = param(
+        (0.1, 0.3), '(min, max) radius of the clutter discs, metres')
+    clutter_distance: tuple[float, float] = param(
+        (1.0, 4.0), '(min, max) distance of a disc centre from the sensor, metres')
+    short_fraction: float = param(0.0, 'fraction of beams replaced by a random shorter reading')
+    sensor_offset: tuple[float, float, float] = param(
+        (0.0, 0.0, 0.0), "the laser's pose on the base (x, y, yaw)")
+    seed: int = param(0, 'random seed (poses depend only on it, the map and the clearance)')
+    stamp0: float = param(1.0, 'stamp of the first scan, seconds')
+    period: float = param(0.1, 'time between scans, seconds')
 
     def validate(self) -> None:
         if self.count < 1 or self.beams < 2:

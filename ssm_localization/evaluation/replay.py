@@ -8,9 +8,9 @@ from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
+from tqdm import tqdm
 
 from ..localization.localizer import GlobalLocalizer, Localization
-from ..progress import ProgressBar
 from ..transforms import Pose2, wrap_angle
 
 #: success: status ok and within these bounds of the ground truth (the issue's definition)
@@ -140,11 +140,9 @@ def replay_scans(localizer: GlobalLocalizer, scans: Sequence, truth: dict[float,
                  progress: bool = True) -> list[ResultRow]:
     """Localize each ScanRecord on its own (no tracking, no odometry)."""
     truths = match_truth(np.array([s.stamp for s in scans]), truth or {})
-    bar = ProgressBar(len(scans), 'replay', enabled=progress)
     rows = []
-    for i, (scan, gt) in enumerate(zip(scans, truths)):
+    for scan, gt in tqdm(zip(scans, truths), desc='replay', total=len(scans), disable=not progress):
         loc = localizer.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
                                       scan.range_min, scan.range_max)
         rows.append(ResultRow.from_localization(scan.stamp, loc, gt))
-        bar.update(i + 1)
     return rows

@@ -259,8 +259,7 @@ class GlobalLocalizer:
     def _base_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
         """Propagate the laser-pose covariance to the base pose (first order)."""
         lx, ly, _ = inverse(self.config.laser_pose)
-        c, s = np.cos(laser_pose[2]), np.sin(laser_pose[2])
-        off = (c * lx - s * ly, s * lx + c * ly)
+        off = apply((0.0, 0.0, laser_pose[2]), (lx, ly))[0]      # laser -> base, in the map
         jac = np.array([[1.0, 0.0, -off[1]], [0.0, 1.0, off[0]], [0.0, 0.0, 1.0]])
         return jac @ cov_laser @ jac.T
 

@@ -16,7 +16,7 @@ import numpy as np
 import yaml
 from PIL import Image, UnidentifiedImageError
 
-from ..transforms import quaternion_to_yaw
+from ..transforms import apply, quaternion_to_yaw
 
 MODES = ('trinary', 'scale', 'raw')
 
@@ -85,11 +85,7 @@ class OccupancyMap:
         """Centres (N, 2) of the cells ``(rows, cols)``."""
         r = np.asarray(rows, dtype=float).reshape(-1)
         col = np.asarray(cols, dtype=float).reshape(-1)
-        ox, oy, oyaw = self.origin
-        c, s = math.cos(oyaw), math.sin(oyaw)
-        u = (col + 0.5) * self.resolution
-        v = (r + 0.5) * self.resolution
-        return np.column_stack((ox + c * u - s * v, oy + s * u + c * v))
+        return apply(self.origin, np.column_stack((col + 0.5, r + 0.5)) * self.resolution)
 
     def in_bounds(self, rows, cols) -> np.ndarray:
         r, c = np.asarray(rows), np.asarray(cols)

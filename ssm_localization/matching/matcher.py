@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config.matcher import MatcherConfig
+from ..transforms import apply
 from .descriptors import candidates
 from .features import ScanFeatures, prepare_scan
 from .pairwise import affinity_matrix
@@ -98,9 +99,7 @@ def overlap(ref: ScanFeatures, new: ScanFeatures, pose, dist: float) -> float:
     ``pose``."""
     if len(new.fine_points) == 0 or len(ref.fine_points) == 0:
         return 0.0
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    moved = new.fine_points @ np.array([[c, s], [-s, c]]) + np.array(pose[:2])
-    d, _ = ref.fine_tree.query(moved, distance_upper_bound=dist)
+    d, _ = ref.fine_tree.query(apply(pose, new.fine_points), distance_upper_bound=dist)
     return float(np.mean(d < dist))
 
 
@@ -146,9 +145,7 @@ def _estimate(ref: ScanFeatures, new: ScanFeatures, q: np.ndarray, xq: np.ndarra
     if best is None:
         return None
     pose, mask, rms, ov = best
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    moved = npts @ np.array([[c, s], [-s, c]]) + np.array(pose[:2])
-    mask2 = np.linalg.norm(rp - moved, axis=1) < config.ransac_threshold
+    mask2 = np.linalg.norm(rp - apply(pose, npts), axis=1) < config.ransac_threshold
     if mask2.sum() >= mask.sum() // 2:
         mask = mask2
     return pose, mask, rms, ov

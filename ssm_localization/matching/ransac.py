@@ -9,7 +9,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..transforms import compose, inverse
+from ..transforms import apply, compose, inverse
 
 
 def two_point_poses(ref_a, new_a, ref_b, new_b) -> np.ndarray:
@@ -108,7 +108,7 @@ def ransac_hypotheses(ref: np.ndarray, new: np.ndarray, threshold: float, iterat
         pose = tuple(float(v) for v in raw)
         for _ in range(2):
             pose = procrustes(ref[mask], new[mask])
-            res = np.linalg.norm(ref - _apply(pose, new), axis=1)
+            res = np.linalg.norm(ref - apply(pose, new), axis=1)
             m2 = res < threshold
             if m2.sum() < 2:
                 break
@@ -124,12 +124,6 @@ def ransac_pose(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: 
     ``(None, empty mask)``."""
     hyps = ransac_hypotheses(ref, new, threshold, iterations, rng, min_span, weights, 1)
     return hyps[0] if hyps else (None, np.zeros(len(ref), dtype=bool))
-
-
-def _apply(pose, pts: np.ndarray) -> np.ndarray:
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    return np.column_stack((c * pts[:, 0] - s * pts[:, 1] + pose[0],
-                            s * pts[:, 0] + c * pts[:, 1] + pose[1]))
 
 
 def icp_point_to_line(ref: np.ndarray, ref_normals: np.ndarray, new: np.ndarray, pose,
@@ -157,7 +151,7 @@ def icp_point_to_line(ref: np.ndarray, ref_normals: np.ndarray, new: np.ndarray,
     used, rms = 0, math.inf
     eye = np.eye(3)
     for _ in range(iterations):
-        q = _apply(pose, new)
+        q = apply(pose, new)
         dist, nn = tree.query(q, distance_upper_bound=gate)
         keep = dist < gate
         if keep.sum() < 3:
@@ -200,12 +194,12 @@ def mutual_nn_procrustes(ref: np.ndarray, new: np.ndarray, pose, gate: float,
     used = 0
     idx = np.arange(len(new))
     for _ in range(iterations):
-        q = _apply(pose, new)
+        q = apply(pose, new)
         d, nn = ref_tree.query(q, distance_upper_bound=gate)
         found = d < gate
         if found.sum() < 3:
             break
-        back_pts = _apply(inverse(pose), ref[nn[found]])
+        back_pts = apply(inverse(pose), ref[nn[found]])
         _, back = new_tree.query(back_pts)
         keep = idx[found][back == idx[found]]
         if len(keep) < 3:

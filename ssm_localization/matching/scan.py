@@ -133,6 +133,14 @@ def tangents(points: np.ndarray, gap: float, direction: float = 1.0) -> np.ndarr
     return direction * u / norm[:, None]
 
 
+def principal_axes(cxx, cxy, cyy) -> tuple[np.ndarray, np.ndarray]:
+    """PCA of N 2x2 covariances ``[[cxx, cxy], [cxy, cyy]]`` (batched ``numpy.linalg.eigh``):
+    eigenvalues (N, 2) ascending and the unit principal direction (N, 2), of arbitrary sign."""
+    cov = np.stack((np.stack((cxx, cxy), axis=-1), np.stack((cxy, cyy), axis=-1)), axis=-2)
+    evals, evecs = np.linalg.eigh(cov)
+    return evals, np.ascontiguousarray(evecs[..., 1])
+
+
 def local_normals(points: np.ndarray, radius: float, half_window: int = 4,
                   max_radius: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals (N, 2) by PCA of the scan-order neighbours within ``radius`` and weights (N,).
@@ -175,16 +183,9 @@ def local_normals(points: np.ndarray, radius: float, half_window: int = 4,
     cxx = sxx / cnt - mx * mx
     cxy = sxy / cnt - mx * my
     cyy = syy / cnt - my * my
-    tr = cxx + cyy
-    disc = np.sqrt(np.maximum((cxx - cyy) ** 2 / 4.0 + cxy * cxy, 0.0))
-    lmax = tr / 2.0 + disc
-    lmin = np.maximum(tr / 2.0 - disc, 0.0)
-    # eigenvector of lmax (the line direction), then its normal
-    tx = np.where(np.abs(cxy) > 1e-15, lmax - cyy, np.where(cxx >= cyy, 1.0, 0.0))
-    ty = np.where(np.abs(cxy) > 1e-15, cxy, np.where(cxx >= cyy, 0.0, 1.0))
-    tn = np.hypot(tx, ty)
-    tn[tn == 0.0] = 1.0
-    normals = np.column_stack((-ty / tn, tx / tn))
+    evals, line = principal_axes(cxx, cxy, cyy)
+    lmin, lmax = np.maximum(evals[:, 0], 0.0), evals[:, 1]
+    normals = np.column_stack((-line[:, 1], line[:, 0]))
     ratio = lmin / np.where(lmax > 0.0, lmax, 1.0)
     w = np.where((cnt >= 3) & (lmax > 0.0), np.clip(1.0 - 3.0 * ratio, 0.0, 1.0), 0.0)
     return normals, w
@@ -238,9 +239,7 @@ def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
     cxx = (m * dx * dx).sum(axis=1) / c - mx * mx
     cxy = (m * dx * dy).sum(axis=1) / c - mx * my
     cyy = (m * dy * dy).sum(axis=1) / c - my * my
-    # principal direction: angle 0.5 * atan2(2 cxy, cxx - cyy)
-    phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
-    u = np.column_stack((np.cos(phi), np.sin(phi)))
+    u = principal_axes(cxx, cxy, cyy)[1]
     sweep = np.column_stack((-p[:, 1], p[:, 0]))
     bad = (cnt < 2) | ((cxx + cyy) <= 0.0)
     sn = np.linalg.norm(sweep, axis=1)

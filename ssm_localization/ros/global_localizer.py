@@ -39,15 +39,14 @@ from ssm_localization.ros.conversions import (pose_with_covariance, scan_args_fr
 from ssm_localization.ros.executor import spin
 from ssm_localization.ros.index_builder import IndexBuilder
 from ssm_localization.ros.maps import usable_map
-from ssm_localization.ros.parameters import (build_config, declare_table, laser_pose_of,
-                                             localizer_parameters)
+from ssm_localization.ros.parameters import (DYNAMIC, build_config, declare_table,
+                                             laser_pose_of, localizer_parameters)
 from ssm_localization.ros.qos import LATCHED_QOS
 
 MODES = ('on_demand', 'continuous')
 MARKER_PERIOD = 1.0   # seconds between marker updates in continuous mode
 EXECUTOR_THREADS = 8
 MAX_WAITING_CALLS = EXECUTOR_THREADS - 3   # relocalize calls blocked on the next scan at once
-DYNAMIC = ('scan_timeout', 'publish_initialpose', 'publish_markers')   # may change at run time
 
 def format_result(loc) -> str:
     """One line for the service answer / log: pose, node, status, score, latency."""

@@ -7,36 +7,16 @@ Config fields become dotted parameter names (``index.*``, ``localizer.*``: the s
 from __future__ import annotations
 
 import dataclasses
-import inspect
-import re
+import sys
+from pathlib import Path
 from typing import Any
 
+import yaml
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from ssm_localization.config import IndexConfig, LocalizerConfig
 from ssm_localization.config import params as ssm_params
-
-# Descriptions of config fields (dotted ROS names); others get a generic one.
-DESCRIPTIONS: dict[str, str] = {
-    'index.beams': 'beams of each virtual scan taken at a topological node (full turn)',
-    'index.max_range': 'range of the virtual laser when casting the node scans, metres',
-    'localizer.top_n': 'candidate nodes kept by the spectral coarse stage (paper: N = 5)',
-    'localizer.sigma_d': 'eq. (10) vicinity score distance scale, metres',
-    'localizer.prefilter': 'nodes kept by descriptor voting before spectral ranking; 0 = all',
-    'localizer.paper_mode': 'plain paper pipeline: no prefilter, refinement or map check',
-    'localizer.min_score': 'map-agreement score below which a hypothesis is rejected',
-    'index.matcher.ransac_iterations': 'RANSAC iterations of the fine pose (paper II.C)',
-    'index.matcher.ransac_threshold': 'RANSAC inlier distance, metres',
-    'index.matcher.ransac_min_span': 'RANSAC: minimum spread of a 2-pair sample, metres',
-    'index.matcher.min_inliers': 'fewer RANSAC inliers than this: no match',
-    'index.matcher.seed': 'random seed of RANSAC (results are reproducible)',
-    'index.matcher.icp': 'refine each match by point-to-line ICP (beyond the paper)',
-    'index.matcher.weights': 'logistic weights of the pairwise affinity (eq. 4)',
-    'index.matcher.desc_radius': 'radius of the local shape descriptors, metres',
-}
-
-GENERIC = 'see '   # prefix of the description of a config field documented nowhere else
 
 # Config fields that the node maps from its own parameters instead (laser_x/laser_y/laser_yaw).
 SENSOR_POSE_FIELDS = ('laser_pose', 'sensor_pose')
@@ -74,42 +54,23 @@ def config_parameters(prefix: str, config: Any) -> dict[str, Any]:
     return out
 
 
-def field_descriptions(cls: type) -> dict[str, str]:
-    """Field descriptions of a config dataclass, from its source: a trailing ``# comment`` on the
-    field line, or a ````name````: text`` entry in the class docstring."""
-    out: dict[str, str] = {}
-    try:
-        source = inspect.getsource(cls)
-    except (OSError, TypeError):
-        return out
-    doc = ' '.join((cls.__doc__ or '').split())
-    for names, text in re.findall(r'((?:``\w+``(?:,\s*|\s+and\s+)?)+):\s*([^`]+)', doc):
-        for name in re.findall(r'``(\w+)``', names):
-            out[name] = text.strip().rstrip(';,')
-    for name, text in re.findall(r'^\s+(\w+)\s*:[^#\n]*=[^#\n]*#\s*(.+)$', source, re.M):
-        out[name] = text.strip()
-    return out
-
-
 def _described(prefix: str, config: Any) -> dict[str, str]:
-    """``{dotted name: description}`` for every leaf field of a config tree."""
+    """``{dotted name: description}`` for every leaf field of a config tree (``param`` help)."""
     out: dict[str, str] = {}
-    notes = field_descriptions(type(config))
     for f in dataclasses.fields(config):
         value = getattr(config, f.name)
         name = f'{prefix}.{f.name}'
         if dataclasses.is_dataclass(value):
             out.update(_described(name, value))
         else:
-            out[name] = notes.get(f.name, '')
+            out[name] = f.metadata.get('help', '')
     return out
 
 
 def config_parameter_table(prefix: str, config: Any) -> dict[str, tuple[Any, str]]:
     """``{dotted name: (default, description)}`` of a config dataclass (ROS-typable fields)."""
     notes = _described(prefix, config)
-    return {name: (default, DESCRIPTIONS.get(name) or notes.get(name) or
-                   f'{GENERIC}{type(config).__name__}.{name.split(".", 1)[1]}')
+    return {name: (default, notes[name])
             for name, default in config_parameters(prefix, config).items()}
 
 
@@ -169,6 +130,9 @@ def indexer_parameters() -> dict[str, tuple[Any, str]]:
             **LASER_PARAMS, **MAP_PARAMS, **config_parameter_table('index', IndexConfig())}
 
 
+#: global_localizer parameters that may change at run time (the others are read-only)
+DYNAMIC = ('scan_timeout', 'publish_initialpose', 'publish_markers')
+
 NODE_PARAMS: dict[str, tuple[Any, str]] = {
     'mode': ('on_demand', 'on_demand: localize on the relocalize service only; continuous: '
                           'every scan (or at most rate Hz)'),
@@ -192,44 +156,69 @@ def localizer_parameters() -> dict[str, tuple[Any, str]]:
             **config_parameter_table('localizer', LocalizerConfig())}
 
 
-def _yaml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, str):
-        return value if value and value.replace('_', '').isalnum() else repr(value)
-    if isinstance(value, (list, tuple)):
-        return '[' + ', '.join(_yaml_value(v) for v in value) + ']'
-    text = repr(value)
-    if isinstance(value, float) and 'e' in text and '.' not in text:
-        text = text.replace('e', '.0e')      # 1e-05 is a string to YAML 1.1; 1.0e-05 a float
-    return text
+PARAMS_FILE_HEADER = """\
+# ssm_localization ROS 2 parameters, every one at its default. Generated by `make params-yaml`
+# (ssm_localization/ros/parameters.py; test_ros_params checks it is current); what each one
+# means: docs/PARAMETERS.md. Nested keys are dotted parameter names (index.matcher.max_points).
+#   ros2 run ssm_localization global_localizer --ros-args --params-file config/ssm_localization.yaml
+"""
+
+
+def node_tables() -> dict[str, dict[str, tuple[Any, str]]]:
+    """``{node name: its parameter table}`` (node parameters first, then the dotted ones sorted)."""
+    out = {}
+    for node, table in (('global_localizer', localizer_parameters()),
+                        ('map_indexer', indexer_parameters())):
+        names = [n for n in table if '.' not in n] + sorted(n for n in table if '.' in n)
+        out[node] = {name: table[name] for name in names}
+    return out
 
 
 def params_yaml() -> str:
-    """config/ssm_localization.yaml: both nodes' parameters at their defaults.
+    """config/ssm_localization.yaml: both nodes' parameters at their defaults (``yaml.safe_dump``
+    under a short header; the descriptions are in :func:`parameters_markdown`)."""
+    doc: dict[str, Any] = {}
+    for node, table in node_tables().items():
+        section: dict[str, Any] = {}
+        for name, (default, _) in table.items():
+            *parents, leaf = name.split('.')
+            cur = section
+            for part in parents:
+                cur = cur.setdefault(part, {})
+            cur[leaf] = list(default) if isinstance(default, tuple) else default
+        doc[node] = {'ros__parameters': section}
+    return PARAMS_FILE_HEADER + yaml.safe_dump(doc, sort_keys=False, default_flow_style=False)
 
-    Regenerate after changing a default: ``make params-yaml``.
-    """
-    lines = ['# ssm_localization ROS 2 parameters, every one at its default (generated by',
-             '# ssm_localization.ros.parameters.params_yaml; test_ros_params checks it).',
-             '#   ros2 run ssm_localization global_localizer --ros-args --params-file '
-             'config/ssm_localization.yaml',
-             '# Nested keys are dotted parameter names (index.matcher.max_points). Floats need a',
-             '# decimal point: ROS parameters are strictly typed.']
-    for node, table in (('global_localizer', localizer_parameters()),
-                        ('map_indexer', indexer_parameters())):
-        lines += [f'{node}:', '  ros__parameters:']
-        prev: list[str] = []
-        for name in [n for n in table if '.' not in n] + sorted(n for n in table if '.' in n):
-            default, desc = table[name]
-            parts = name.split('.')
-            common = 0
-            while common < min(len(prev), len(parts) - 1) and prev[common] == parts[common]:
-                common += 1
-            for depth in range(common, len(parts) - 1):
-                lines.append('    ' + '  ' * depth + parts[depth] + ':')
-            if not desc.startswith(GENERIC):
-                lines.append('    ' + '  ' * (len(parts) - 1) + f'# {desc}')
-            lines.append('    ' + '  ' * (len(parts) - 1) + f'{parts[-1]}: {_yaml_value(default)}')
-            prev = parts[:-1]
+
+def parameters_markdown() -> str:
+    """docs/PARAMETERS.md: one table per node (name, default, description)."""
+    lines = ['# ROS 2 parameters', '',
+             'Generated by `make params-yaml` from the parameter tables in',
+             '`ssm_localization/ros/parameters.py` and the `param(default, help)` metadata of the',
+             'config dataclasses in `ssm_localization/config/` (test_ros_params checks it is',
+             'current). `config/ssm_localization.yaml` lists the same parameters at their defaults.',
+             'Dotted names are config fields: `index.*` is `IndexConfig`, `index.matcher.*`',
+             '`MatcherConfig`, `index.topology.*` `TopologyConfig`, `localizer.*` `LocalizerConfig`.',
+             'All of them are read-only except the ones marked *dynamic*.']
+    for node, table in node_tables().items():
+        lines += ['', f'## {node}', '', '| parameter | default | description |', '|---|---|---|']
+        for name, (default, desc) in table.items():
+            value = yaml.safe_dump(list(default) if isinstance(default, tuple) else default,
+                                   default_flow_style=True).strip().removesuffix('...').strip()
+            text = desc.replace('|', '\\|')
+            if node == 'global_localizer' and name in DYNAMIC:
+                text += ' *(dynamic)*'
+            lines.append(f'| `{name}` | `{value}` | {text} |')
     return '\n'.join(lines) + '\n'
+
+
+def write_params_files(yaml_path: str | Path, markdown_path: str | Path) -> None:
+    """Write :func:`params_yaml` and :func:`parameters_markdown` (what ``make params-yaml`` runs)."""
+    Path(yaml_path).write_text(params_yaml())
+    Path(markdown_path).write_text(parameters_markdown())
+
+
+if __name__ == '__main__':
+    if len(sys.argv) != 3:
+        sys.exit('usage: python -m ssm_localization.ros.parameters PARAMS.yaml PARAMETERS.md')
+    write_params_files(sys.argv[1], sys.argv[2])
