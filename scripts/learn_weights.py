@@ -28,7 +28,7 @@ Usage::
                                               [--out config/matcher_weights.yaml]
 
 Prints the weights and writes them to the YAML file; copy them into
-``ssm_localization/matcher.py:LEARNED_WEIGHTS`` (the matcher default).
+``ssm_localization/config/matcher.py:LEARNED_WEIGHTS`` (the matcher default).
 """
 from __future__ import annotations
 

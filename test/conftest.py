@@ -4,6 +4,8 @@ ROS isolation: every test run gets its own ``ROS_DOMAIN_ID`` (from the pid) and 
 discovery, set here before any test calls ``rclpy.init``, so parallel runs (and a robot on the
 network) never see each other. Set ``SSM_TEST_ROS_DOMAIN_ID`` to force a domain.
 ROS helpers (:class:`RosHarness`, the ``ros`` fixture) live here for the ``test_ros_*`` modules.
+Shared data (``../shared/data``) and the committed bags: :func:`shared_data` / :func:`find_bag`
+skip a test when they are missing, except under CI (``CI=true``), where that is an error.
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ from typing import Any, Callable
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_MAPS = REPO.parent / 'shared' / 'data' / 'maps'
+SHARED_DATA = REPO.parent / 'shared' / 'data'
 BAGS = REPO / 'bags'
 
 _RNG = random.Random(os.getpid() ^ time.time_ns())
@@ -35,12 +37,27 @@ def venv_bin(name: str) -> Path:
     return Path(sys.executable).parent / name
 
 
+def missing(reason: str) -> None:
+    """Skip the running test for missing data, or fail it under CI (``CI=true``)."""
+    if os.environ.get('CI', '').strip().lower() == 'true':
+        pytest.fail(f'{reason} (CI=true: the test data must be present)', pytrace=False)
+    pytest.skip(reason)
+
+
+def shared_data(*parts: str) -> Path:
+    """``../shared/data/<parts>``; see :func:`missing` when it does not exist."""
+    path = SHARED_DATA.joinpath(*parts)
+    if not path.exists():
+        missing(f'shared data not found: {path}')
+    return path
+
+
 def find_bag(name: str) -> Path:
-    """bags/<name> (directory or .mcap); skips the test when that bag has not been generated."""
+    """bags/<name> (directory or .mcap); see :func:`missing` when it does not exist."""
     for cand in (BAGS / name, BAGS / f'{name}.mcap'):
         if cand.exists():
             return cand
-    pytest.skip(f'bag {BAGS / name} is not in the repository yet')
+    missing(f'bag {BAGS / name} is not in the repository')
 
 
 class RosHarness:
@@ -163,7 +180,7 @@ def synthetic_map(variant: int = 0):
     """A small 3-room map (10 m x 7 m at 0.05 m, frame ``map``); ``variant`` adds furniture."""
     import numpy as np
 
-    from ssm_localization.mapping.map_io import OccupancyMap
+    from ssm_localization import OccupancyMap
     res = 0.05
     data = np.zeros((140, 200), np.int8)
 

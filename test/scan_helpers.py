@@ -1,12 +1,7 @@
-"""Test helpers: synthetic laser scans of a polygonal room and the shared CARMEN data."""
+"""Test helpers: synthetic laser scans of a polygonal room."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
-
-DATA = Path(__file__).resolve().parents[1].parent / 'shared' / 'data'
-CARMEN = DATA / 'carmen'
 
 # an irregular room (metres) with a pillar and a niche: no symmetry
 ROOM = [

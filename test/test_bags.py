@@ -1,4 +1,5 @@
-"""io/bag_reader.py, io/bag_writer.py: rosbag2/mcap round trip, bare .mcap files, damaged bags, missing topics."""
+"""io/bag_reader.py, io/bag_writer.py: rosbag2/mcap round trip, bare .mcap files, damaged bags,
+missing topics."""
 import math
 import shutil
 import warnings
@@ -9,6 +10,7 @@ import pytest
 
 from ssm_localization import (BagError, OccupancyMap, ScanRecord, iter_scans, load_map_yaml,
                               read_bag, write_bag)
+from ssm_localization.cli import main
 from ssm_localization.io.bag_reader import bag_topics
 
 
@@ -111,12 +113,14 @@ def test_missing_bag(tmp_path):
         read_bag(tmp_path / 'nope')
 
 
-def test_missing_scan_topic(tmp_path):
+def test_missing_scan_topic(tmp_path, capsys):
     scans = _scans(2)
     path = write_bag(tmp_path / 'gt_only', map=_map(), ground_truth=_poses(scans))
     with pytest.raises(BagError, match=r'no /scan topic.*/ground_truth'):
         read_bag(path)
-    assert issubclass(BagError, ValueError)
+    # a BagError is a user error: the command line reports it in one line, exit status 2
+    assert main(['replay', str(path), '-o', str(tmp_path / 'r.csv')]) == 2
+    assert 'no /scan topic' in capsys.readouterr().err
     with pytest.raises(ValueError, match='no /laser topic'):
         list(iter_scans(path, scan_topic='/laser'))
     assert read_bag(path, require_scans=False).map is not None
@@ -197,7 +201,7 @@ def test_committed_bags(name):
         a = s.beam_angles()
         ok = np.isfinite(r) & (r < 15.0)
         pts = apply(data.ground_truth_of(s), np.column_stack((r[ok] * np.cos(a[ok]),
-                                                               r[ok] * np.sin(a[ok]))))
+                                                              r[ok] * np.sin(a[ok]))))
         rows, cols = data.map.world_to_cell(pts)
         inside = data.map.in_bounds(rows, cols)
         d.append(dist[rows[inside], cols[inside]])

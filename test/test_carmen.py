@@ -1,24 +1,21 @@
-"""carmen.py: parsing the shared CARMEN logs, map building, conversion to map + bag."""
-from pathlib import Path
+"""io/carmen.py and mapping/grid.py: parsing the shared CARMEN logs, map building, conversion to
+map + bag."""
 
 import numpy as np
 import pytest
 
+from conftest import shared_data
 from ssm_localization import MapBuildConfig, load_map_yaml, read_bag
 from ssm_localization.io import carmen
 from ssm_localization.mapping.grid import build_occupancy_grid
 from ssm_localization.transforms import compose, inverse
 
-DATA = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'carmen'
 LOGS = {'intel': 910, 'aces': 440, 'freiburg-079': 4791}
 NO_RETURN = {'intel': 81.83, 'aces': 50.0, 'freiburg-079': 81.91}
 
 
 def _log_path(name):
-    path = DATA / f'{name}-corrected.log.gz'
-    if not path.is_file():
-        pytest.skip(f'shared data absent: {path}')
-    return path
+    return shared_data('carmen', f'{name}-corrected.log.gz')
 
 
 @pytest.fixture(scope='module')
@@ -78,7 +75,7 @@ def test_grid_of_a_synthetic_room():
     c, s = np.abs(np.cos(angles)), np.abs(np.sin(angles))
     ranges = 2.0 / np.maximum(c, s)
     data, origin = build_occupancy_grid(ranges[None], np.zeros((1, 3)), angles,
-                                               MapBuildConfig(resolution=0.1, margin=0.5))
+                                        MapBuildConfig(resolution=0.1, margin=0.5))
     assert origin[0] == pytest.approx(-2.5) and data.shape == (50, 50)
     assert data[25, 25] == 0 and data[25, 5] == 100 and data[5, 25] == 100
     assert data[0, 0] == -1

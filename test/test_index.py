@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssm_localization import (IndexConfig, MapIndex, OccupancyMap, TopologyConfig, build_index,
+from conftest import shared_data
+from ssm_localization import (IndexConfig, OccupancyMap, TopologyConfig, build_index,
                               load_index, load_index_config, load_map_yaml, save_index,
                               save_map_yaml)
 from ssm_localization.config import config_from_json, config_to_json
@@ -17,7 +18,6 @@ from ssm_localization.mapping.index import FORMAT_VERSION
 from ssm_localization.mapping.raycast import cast_rays
 from ssm_localization.mapping.topology import NodeKind
 
-MAPS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'maps'
 RES = 0.05
 
 
@@ -84,7 +84,7 @@ def test_save_load_round_trip(built, tmp_path):
     index, _ = built
     path = save_index(index, tmp_path / 'idx.npz')
     back = load_index(path, expected_map=_rooms())
-    assert isinstance(back, MapIndex)
+    assert len(back) == len(index) > 0 and back.version == FORMAT_VERSION
     assert back.config == index.config
     for name in ('node_xy', 'node_kind', 'node_sensor_pose', 'ranges', 'beam_angles',
                  'gvd_mask', 'edges', 'node_clearance'):
@@ -151,15 +151,14 @@ def test_refuses_pickles_and_garbage(tmp_path):
 
 
 def test_empty_room_gets_nodes_from_extras():
-    if not (MAPS / 'empty_room.yaml').is_file():
-        pytest.skip('shared maps not present')
-    index = build_index(load_map_yaml(MAPS / 'empty_room.yaml'))
+    empty_room = shared_data('maps', 'empty_room.yaml')
+    index = build_index(load_map_yaml(empty_room))
     counts = index.kind_counts()
     assert counts['branch'] == 0 and len(index) >= 2
     assert counts['region'] >= 1
     paper_only = IndexConfig(topology=TopologyConfig(dead_end_nodes=False, region_nodes=False,
                                                      arc_spacing=0.0))
-    assert len(build_index(load_map_yaml(MAPS / 'empty_room.yaml'), paper_only)) == 0
+    assert len(build_index(load_map_yaml(empty_room), paper_only)) == 0
 
 
 def test_map_without_free_space_gives_an_empty_index(tmp_path):

@@ -1,4 +1,5 @@
-"""localizer.py: vicinity score (eq. 10), candidate ranking, frames, statuses and bad input."""
+"""localization/localizer.py: vicinity score (eq. 10), candidate ranking, frames, statuses and
+bad input."""
 from __future__ import annotations
 
 import math
@@ -8,8 +9,7 @@ import pytest
 
 from ssm_localization import (GlobalLocalizer, IndexConfig, Localization, LocalizerConfig,
                               SimulationConfig, build_index, prepare_scan, read_bag, simulate)
-from ssm_localization.localization.localizer import (STATUSES,
-                                        vicinity_score)
+from ssm_localization.localization.localizer import STATUSES, vicinity_score
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.matching.matcher import spectral_score
 from ssm_localization.mapping.raycast import cast_rays
@@ -270,8 +270,8 @@ INC = 2 * math.pi / 360
         'inf-increment'])
 def test_bad_scans_fail_cleanly(localizer, ranges, angle_min, inc, why):
     out = localizer.localize_scan(ranges, angle_min, inc, 0.05, 30.0)
-    assert isinstance(out, Localization)
     assert out.status == 'failed' and not out.ok
+    assert out.pose is None and out.candidates == [] and math.isnan(out.score)
     assert why in out.message
     assert out.node == -1
 

@@ -9,11 +9,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from conftest import shared_data
 from ssm_localization.mapping.map_io import (OccupancyMap, load_map_yaml, occupancy_map_from_msg,
-                                     save_map_yaml)
+                                             save_map_yaml)
 
-SHARED = Path(__file__).resolve().parents[1].parent / 'shared' / 'data'
-MAPS = SHARED / 'maps'
 SHARED_MAPS = ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room')
 
 
@@ -30,10 +29,8 @@ BASE = ('image: m.pgm\nresolution: 0.1\norigin: [1.0, 2.0, 0.0]\nnegate: 0\n'
 
 @pytest.mark.parametrize('name', SHARED_MAPS)
 def test_every_shared_map_loads(name):
-    if not (MAPS / f'{name}.yaml').is_file():
-        pytest.skip('shared maps not present')
-    m = load_map_yaml(MAPS / f'{name}.yaml')
-    img = np.asarray(Image.open(MAPS / f'{name}.pgm'))
+    m = load_map_yaml(shared_data('maps', f'{name}.yaml'))
+    img = np.asarray(Image.open(shared_data('maps', f'{name}.pgm')))
     assert m.shape == img.shape
     assert m.data.dtype == np.int8
     assert set(np.unique(m.data)) <= {-1, 0, 100}
@@ -45,17 +42,16 @@ def test_every_shared_map_loads(name):
 
 
 def test_shared_map_geometry():
-    if not (MAPS / 'empty_room.yaml').is_file():
-        pytest.skip('shared maps not present')
-    m = load_map_yaml(MAPS / 'empty_room.yaml')
+    maps = shared_data('maps')
+    m = load_map_yaml(maps / 'empty_room.yaml')
     assert m.resolution == pytest.approx(0.1)
     assert m.origin == (-10.0, -10.0, 0.0)
     # the 205 grey of depot with free_thresh 0.25 is free under map_server semantics
-    d = load_map_yaml(MAPS / 'depot.yaml')
-    img = np.flipud(np.asarray(Image.open(MAPS / 'depot.pgm')))
+    d = load_map_yaml(maps / 'depot.yaml')
+    img = np.flipud(np.asarray(Image.open(maps / 'depot.pgm')))
     assert (d.data[img == 205] == 0).all()
-    t = load_map_yaml(MAPS / 'turtlebot3_world.yaml')
-    img = np.flipud(np.asarray(Image.open(MAPS / 'turtlebot3_world.pgm')))
+    t = load_map_yaml(maps / 'turtlebot3_world.yaml')
+    img = np.flipud(np.asarray(Image.open(maps / 'turtlebot3_world.pgm')))
     assert (t.data[img == 205] == -1).all()
 
 

@@ -6,11 +6,9 @@ import argparse
 import numpy as np
 import pytest
 
-from scan_helpers import CARMEN, DATA, room_scan
+from conftest import shared_data
+from scan_helpers import room_scan
 from ssm_localization.transforms import apply, inverse
-
-needs_carmen = pytest.mark.skipif(not (CARMEN / 'intel-corrected.log.gz').is_file(),
-                                  reason=f'shared CARMEN data not found in {CARMEN}')
 
 
 def test_plot_match_writes_png(tmp_path):
@@ -29,13 +27,13 @@ def test_plot_match_writes_png(tmp_path):
     assert out2.is_file()
 
 
-@needs_carmen
 def test_match_command(tmp_path, capsys):
     pytest.importorskip('matplotlib')
     from ssm_localization.cli import match_cmd
+    carmen = shared_data('carmen')
     p = argparse.ArgumentParser()
     match_cmd.add_arguments(p)
-    args = p.parse_args([str(CARMEN / 'freiburg-079-corrected.log.gz'), '--k', '200', '--s', '2',
+    args = p.parse_args([str(carmen / 'freiburg-079-corrected.log.gz'), '--k', '200', '--s', '2',
                          '--offset', '0.3', '-0.2', '20', '--plot', str(tmp_path / 'm.png')])
     assert match_cmd.run(args) == 0
     text = capsys.readouterr().out
@@ -43,16 +41,16 @@ def test_match_command(tmp_path, capsys):
     err_mm = float(text.split('error')[1].split('mm')[0])
     assert err_mm < 150
     assert (tmp_path / 'm.png').is_file()
-    bad = p.parse_args([str(CARMEN / 'intel-corrected.log.gz'), '--k', '5000'])
+    bad = p.parse_args([str(carmen / 'intel-corrected.log.gz'), '--k', '5000'])
     with pytest.raises(ValueError, match='--k'):
         match_cmd.run(bad)
 
 
-@needs_carmen
 def test_demo(tmp_path, capsys):
     pytest.importorskip('matplotlib')
     from ssm_localization import demo
-    assert demo.main(['--out', str(tmp_path), '--data', str(DATA)]) == 0
+    shared_data('carmen', 'intel-corrected.log.gz')
+    assert demo.main(['--out', str(tmp_path), '--data', str(shared_data())]) == 0
     assert (tmp_path / 'scan_match.png').is_file()
     assert (tmp_path / 'intel_replay.png').stat().st_size > 0
     rows = (tmp_path / 'intel_results.csv').read_text().splitlines()
@@ -61,12 +59,13 @@ def test_demo(tmp_path, capsys):
     assert 'error' in out and 'success' in out and 'precision' in out
 
 
-@needs_carmen
 def test_bench_quick_runs(capsys):
     from ssm_localization.bench import scanmatch
+    shared_data('carmen', 'freiburg-079-corrected.log.gz')
     p = argparse.ArgumentParser()
     scanmatch.add_arguments(p)
-    args = p.parse_args(['--quick', '--only', 'table2', '--trials', '5', '--data', str(DATA)])
+    args = p.parse_args(['--quick', '--only', 'table2', '--trials', '5',
+                         '--data', str(shared_data())])
     args.quick = False          # keep --trials 5
     assert scanmatch.run(args) == 0
     out = capsys.readouterr().out

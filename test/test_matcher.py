@@ -6,18 +6,16 @@ import math
 import numpy as np
 import pytest
 
-from scan_helpers import CARMEN, pose_error, room_scan
+from conftest import shared_data
+from scan_helpers import pose_error, room_scan
 from ssm_localization import (MatcherConfig, MatchResult, match_features, match_scans,
-                              prepare_scan)
+                              prepare_scan, read_carmen_log)
 from ssm_localization.matching.matcher import spectral_score
 from ssm_localization.matching.ransac import (icp_point_to_line, procrustes, ransac_pose,
-                                     two_point_poses)
+                                              two_point_poses)
 from ssm_localization.matching.scan import ranges_to_points
 from ssm_localization.matching.spectral import binarize, leading_eigenvector, matching_score
 from ssm_localization.transforms import apply, compose, inverse
-
-needs_carmen = pytest.mark.skipif(not (CARMEN / 'intel-corrected.log.gz').is_file(),
-                                  reason=f'shared CARMEN data not found in {CARMEN}')
 
 
 def _perturb(ref, rng, sigma=0.01, n_out=60, max_xy=0.4, max_yaw=np.deg2rad(30)):
@@ -132,11 +130,9 @@ def test_spectral_score_prefers_the_same_place():
 
 
 # ---------------------------------------------------------------- real CARMEN scans
-@needs_carmen
 @pytest.mark.parametrize('name,k', [('intel', 300), ('freiburg-079', 1000)])
 def test_table2_protocol_on_real_scans(name, k):
-    from ssm_localization.io.carmen import read_carmen_log
-    ref = read_carmen_log(CARMEN / f'{name}-corrected.log.gz').points(k)
+    ref = read_carmen_log(shared_data('carmen', f'{name}-corrected.log.gz')).points(k)
     rng = np.random.default_rng(11)
     for _ in range(8):
         new, truth = _perturb(ref, rng)
@@ -145,10 +141,8 @@ def test_table2_protocol_on_real_scans(name, k):
         assert res.ok and dxy < 0.01 and dth < np.deg2rad(0.2), (dxy, np.rad2deg(dth))
 
 
-@needs_carmen
 def test_real_consecutive_pairs_freiburg():
-    from ssm_localization.io.carmen import read_carmen_log
-    log = read_carmen_log(CARMEN / 'freiburg-079-corrected.log.gz')
+    log = read_carmen_log(shared_data('carmen', 'freiburg-079-corrected.log.gz'))
     rng = np.random.default_rng(4)
     ok = 0
     ks = rng.choice(len(log) - 3, 10, replace=False)

@@ -1,4 +1,5 @@
-"""params.py: dataclasses from YAML (flat files, ROS params files, dotted keys), strict keys."""
+"""config/: dataclasses from YAML (flat files, ROS params files, dotted keys), strict keys, the
+``param`` help of every field."""
 from __future__ import annotations
 
 import dataclasses

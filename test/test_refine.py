@@ -1,4 +1,5 @@
-"""refine.py: wall-surface signed distance, Gauss-Newton pose refinement, ray-cast beam check."""
+"""localization/refine.py, verify.py: wall-surface signed distance, Gauss-Newton pose
+refinement, ray-cast beam check."""
 from __future__ import annotations
 
 import math
@@ -7,7 +8,7 @@ import numpy as np
 import pytest
 
 from ssm_localization import SimulationConfig, simulate
-from ssm_localization.localization.refine import SurfaceModel, refine_pose
+from ssm_localization.localization.refine import SurfaceModel, refine_pose, refine_poses
 from ssm_localization.localization.verify import BeamCheck, check_beams
 from ssm_localization.transforms import rotation, wrap_angle
 
@@ -196,20 +197,18 @@ def test_check_beams_empty_and_nan_do_not_crash():
     assert (c.consistent, c.contradicting, c.short) == (0.0, 0.0, 0.0)
     c = check_beams(np.array([np.nan, 1.0]), np.array([1.0, 1.0]))
     assert c.consistent == 0.5 and c.contradicting == 0.0 and c.short == 0.0
-    assert isinstance(c, BeamCheck)
+    assert c.score == 0.5            # a NaN beam counts as neither agreeing nor contradicting
+    assert BeamCheck(0.5, 0.25, 0.0).score == 0.0
 
 
 def test_batched_refinement_equals_single(depot_clean):
     """refine_poses (several hypotheses at once) gives each pose what refine_pose gives it."""
-    from ssm_localization.localization import refine
-    if not hasattr(refine, 'refine_poses'):
-        pytest.skip('no batched refine_poses in this version')
     _, sim, model = depot_clean
     pts = _laser_points(sim.scans[2])
     truth = sim.sensor_poses[2]
     starts = np.array([truth + (0.02, -0.01, 0.01), truth + (-0.03, 0.02, -0.02),
                        truth + (1.0, 0.5, 0.3)])
-    batch = refine.refine_poses(model, pts, starts)
+    batch = refine_poses(model, pts, starts)
     assert len(batch) == 3
     for start, got in zip(starts, batch):
         one = refine_pose(model, pts, tuple(start))

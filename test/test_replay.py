@@ -1,4 +1,5 @@
-"""replay.py: end-to-end replay of the committed bags, summary arithmetic, stamps, RESULTS.csv."""
+"""evaluation/replay.py: end-to-end replay of the committed bags, summary arithmetic, stamps,
+RESULTS.csv."""
 from __future__ import annotations
 
 import csv
@@ -9,8 +10,8 @@ import pytest
 
 from ssm_localization import (GlobalLocalizer, Localization, LocalizerConfig, build_index,
                               read_bag)
-from ssm_localization.evaluation.replay import (ResultRow, match_truth, replay_scans, summarize,
-                                     write_results_csv)
+from ssm_localization.evaluation.replay import (ResultRow, match_truth, replay_scans,
+                                                summarize, write_results_csv)
 
 from conftest import find_bag
 

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from conftest import RCLPY_SKIP_REASON, SHARED_MAPS
+from conftest import RCLPY_SKIP_REASON, shared_data
 
 pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
 
@@ -52,7 +52,7 @@ def test_scan_points_drop_invalid():
 
 def test_map_round_trip():
     from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml
-    occ = load_map_yaml(SHARED_MAPS / 'depot.yaml')
+    occ = load_map_yaml(shared_data('maps', 'depot.yaml'))
     grid = conv.occupancy_grid_from_map(occ, 3.5)
     assert (grid.info.width, grid.info.height) == (occ.width, occ.height)
     assert grid.header.frame_id == 'map' and grid.header.stamp.sec == 3

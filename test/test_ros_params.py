@@ -1,4 +1,5 @@
-"""config/ssm_localization.yaml against the parameters the nodes declare, and --params-file."""
+"""config/ssm_localization.yaml and docs/PARAMETERS.md against the parameters the nodes declare,
+and --params-file."""
 from __future__ import annotations
 
 import pytest
@@ -105,7 +106,7 @@ def test_params_file_overrides_reach_the_core_configs(ros_domain, tmp_path):
     path = tmp_path / 'params.yaml'
     path.write_text(yaml.safe_dump(doc))
     ctx, node = _make(GlobalLocalizerNode, ['--ros-args', '--params-file', str(path),
-                                           '-p', 'rate:=4.0'])
+                                            '-p', 'rate:=4.0'])
     try:
         assert node.mode == 'continuous' and node.rate == 4.0
         assert node.get_parameter('scan_timeout').value == 2.5

@@ -9,7 +9,7 @@ from ssm_localization.matching.descriptors import candidates, shape_context
 from ssm_localization import MatcherConfig
 from ssm_localization.matching.features import ScanFeatures, prepare_scan
 from ssm_localization.matching.pairwise import (affinity_matrix, angle_table, deformation,
-                                       distance_table, potential)
+                                                distance_table, potential)
 from ssm_localization.matching.scan import (as_points, downsample_even, local_normals,
                                             ranges_to_points, robust_tangents, sweep_direction,
                                             tangents)

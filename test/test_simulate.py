@@ -1,16 +1,14 @@
-"""simulate.py: simulated scans agree with ray casting, clutter, field of view, determinism."""
+"""io/simulate.py: simulated scans agree with ray casting, clutter, field of view, determinism."""
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import shared_data
 from ssm_localization import (OccupancyMap, SimulationConfig, load_map_yaml, read_bag, simulate,
                               simulate_bag)
 from ssm_localization.io.simulate import sample_free_poses
 from ssm_localization.mapping.raycast import cast_rays
-
-MAPS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'maps'
 
 
 def _room():
@@ -105,10 +103,7 @@ def test_bad_config(room):
 
 
 def test_bag_on_depot(tmp_path):
-    path = MAPS / 'depot.yaml'
-    if not path.is_file():
-        pytest.skip(f'shared data absent: {path}')
-    occ_map = load_map_yaml(path)
+    occ_map = load_map_yaml(shared_data('maps', 'depot.yaml'))
     sim = simulate_bag(occ_map, tmp_path / 'sim', SimulationConfig(count=5, seed=3))
     data = read_bag(tmp_path / 'sim')
     assert data.topic_counts == {'/map': 1, '/scan': 5, '/ground_truth': 5}

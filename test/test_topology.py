@@ -1,17 +1,13 @@
 """topology: brushfire, GVD and nodes on maps with a known answer (paper section III)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml
-from ssm_localization.config import TopologyConfig
-from ssm_localization.mapping.topology import (NODE_KIND_NAMES, NodeKind,
-                                       build_topology)
+from conftest import shared_data
+from ssm_localization import OccupancyMap, TopologyConfig, load_map_yaml
+from ssm_localization.mapping.topology import NODE_KIND_NAMES, NodeKind, build_topology
 
-MAPS = Path(__file__).resolve().parents[1].parent / 'shared' / 'data' / 'maps'
 RES = 0.05
 ONLY_BRANCHES = TopologyConfig(dead_end_nodes=False, region_nodes=False, arc_spacing=0.0)
 
@@ -132,9 +128,7 @@ def test_config_validation_and_kind_names():
 
 @pytest.mark.parametrize('name', ['depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room'])
 def test_shared_maps(name):
-    if not (MAPS / f'{name}.yaml').is_file():
-        pytest.skip('shared maps not present')
-    m = load_map_yaml(MAPS / f'{name}.yaml')
+    m = load_map_yaml(shared_data('maps', f'{name}.yaml'))
     topo = build_topology(m)
     assert len(topo) > 0
     # every node is traversable: free and at least min_clearance from obstacles

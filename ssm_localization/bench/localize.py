@@ -8,7 +8,7 @@ Data sets (``--sets``):
 - ``intel``, ``aces``, ``fr079``: real scans; the map is built from the even-numbered scans of the
   CARMEN log, the queries are the odd-numbered scans (ground truth: the corrected poses).
 Simulated scans stop at the first occupied cell's boundary, so those sets use the ``boundary``
-wall model (``surface_depth = 0``); the real sets use wall centres (``0.5``). See refine.py.
+wall model (``surface_depth = 0``); the real sets use wall centres (``0.5``). See localization/refine.py.
 
 Prints per set: success (ok and within 0.5 m / 5 deg), precision (correct / answered ok), median
 and mean x, y, yaw errors, latency p50/p95; with ``--paper`` also the plain paper pipeline

@@ -99,8 +99,8 @@ class _Reader:
                 self.types[topic] = msgtype
 
     def _open_prefix(self, path, error: str) -> None:
-        mcap = self.path if self.path.is_file() else next(iter(sorted(self.path.glob('*.mcap'))),
-                                                         None)
+        mcap = (self.path if self.path.is_file()
+                else next(iter(sorted(self.path.glob('*.mcap'))), None))
         prefix, reason = _mcap_prefix(mcap) if mcap is not None else ([], 'no .mcap file')
         if not prefix:
             raise BagError(f'{path}: cannot read bag, truncated or corrupt ({error}; {reason})')

@@ -200,8 +200,8 @@ def monotonic_stamps(stamps: np.ndarray, min_step: float = 1e-3) -> np.ndarray:
 
 
 def log_scan_records(log: CarmenLog, indices: Sequence[int]) -> list[ScanRecord]:
-    """:class:`~ssm_localization.io.bag_records.ScanRecord` s of the scans ``indices`` (frame ``laser``,
-    float32 ranges, ``+inf`` for no return, ``range_max`` = the no-return value)."""
+    """The scans ``indices`` as ``ScanRecord`` s (frame ``laser``, float32 ranges, ``+inf`` for no
+    return, ``range_max`` = the no-return value)."""
     stamps = monotonic_stamps(log.stamps)
     return [ScanRecord.from_ranges(stamps[k], log.ranges[k].astype(np.float32), log.angle_min,
                                    log.angle_increment, range_min=0.0,

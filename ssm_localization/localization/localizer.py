@@ -9,7 +9,7 @@ Pipeline for one query scan (laser frame points ``q``):
 3. fine (IV.B): RANSAC pose of the query against each candidate's virtual scan, vicinity score
    (eq. 10, ``sigma_d``); the node frame turns the local pose into a map-frame laser pose;
 4. beyond the paper: each hypothesis is refined on the map's wall surface (``refine.py``) and
-   verified by ray casting; the status is ``ok`` / ``ambiguous`` / ``failed``.
+   verified by ray casting (``verify.py``); the status is ``ok`` / ``ambiguous`` / ``failed``.
 With ``paper_mode=True`` steps 1 and 4 and the matcher's ICP are skipped and the largest
 vicinity score wins: the plain method of the paper (``bench localize --paper`` compares both).
 """

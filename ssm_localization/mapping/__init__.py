@@ -1,1 +1,2 @@
-"""Maps and their topological index (paper section III): map files, GVD topology, ray casting, index."""
+"""Maps and their topological index (paper section III): map files, occupancy grids from scans,
+GVD topology, ray casting, the index (``build_index``)."""

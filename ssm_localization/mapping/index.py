@@ -3,8 +3,8 @@
 ``build_index`` extracts the nodes (``topology.py``), casts a virtual scan at every node
 (``raycast.py``, Table 1: the virtual laser's pose is the node pose ``(x, y, 0)`` composed with
 the sensor pose on the robot) and precomputes the matcher's per-scan features
-(``matching.features.prepare_scan``). ``save_index`` / ``load_index`` store it as a versioned ``.npz`` without
-pickles: arrays, the map checksum and every parameter as a JSON string.
+(``matching.features.prepare_scan``). ``save_index`` / ``load_index`` store it as a versioned
+``.npz`` without pickles: arrays, the map checksum and every parameter as a JSON string.
 """
 from __future__ import annotations
 

@@ -48,6 +48,7 @@ MARKER_PERIOD = 1.0   # seconds between marker updates in continuous mode
 EXECUTOR_THREADS = 8
 MAX_WAITING_CALLS = EXECUTOR_THREADS - 3   # relocalize calls blocked on the next scan at once
 
+
 def format_result(loc) -> str:
     """One line for the service answer / log: pose, node, status, score, latency."""
     x, y, yaw = loc.pose

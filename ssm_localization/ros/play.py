@@ -1,8 +1,8 @@
 """Publish a bag's topics on live ROS topics (a small ``ros2 bag play`` for our bags).
 
-The bag is read with :mod:`ssm_localization.io.bag_reader`; ``/map`` is published once, first, reliable +
-transient-local (latched); ``/scan`` (reliable, so sensor-data and reliable subscribers both
-match), ``/ground_truth`` and ``/odom`` follow in timestamp order at ``rate`` times real time
+The bag is read with :mod:`ssm_localization.io.bag_reader`; ``/map`` is published once, first,
+reliable + transient-local (latched); ``/scan`` (reliable, so sensor-data and reliable subscribers
+both match), ``/ground_truth`` and ``/odom`` follow in timestamp order at ``rate`` times real time
 (0 = as fast as possible). Topic names are published relative (``scan``), so a namespace or
 ``--ros-args -r`` remapping applies.
 """
