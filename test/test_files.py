@@ -110,7 +110,7 @@ def test_output_checks(tmp_path):
         check_output_file(tmp_path / 'file' / 'out.csv', 'out')
     with pytest.raises(ValueError, match='not a regular file'):
         check_output_file('/dev/null', 'out')
-    with pytest.raises(ValueError, match='exists already'):
+    with pytest.raises(FileExistsError, match='exists already'):
         check_output_dir(tmp_path / 'file', 'bag', overwrite=False)
     with pytest.raises(ValueError, match='not a directory'):
         check_output_dir(tmp_path / 'file', 'folder')

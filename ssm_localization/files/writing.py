@@ -56,13 +56,13 @@ def check_output_dir(path: str | Path, what: str, overwrite: bool | None = None)
     """``path`` after checking a directory can be written there; errors name ``what``.
 
     ``overwrite=None``: the directory may exist already (a folder that receives files);
-    ``False``: it must not exist (``ValueError`` otherwise); ``True``: an existing one will be
-    replaced. A regular file in its place is refused unless ``overwrite`` is true.
+    ``False``: it must not exist (``FileExistsError`` otherwise); ``True``: an existing one will
+    be replaced. A regular file in its place is refused unless ``overwrite`` is true.
     """
     p = Path(path)
     if p.exists() or p.is_symlink():
         if overwrite is False:
-            raise ValueError(f'{what} exists already (use --force to overwrite): {p}')
+            raise FileExistsError(f'{what} exists already (use --force to overwrite): {p}')
         if overwrite is None and not p.is_dir():
             raise ValueError(f'{what} {p}: exists and is not a directory')
     _check_parent(p, what)
