@@ -281,7 +281,7 @@ CASES: list[Case] = [
          ('cut.log.gz', 'cannot read')),
     Case('convert-carmen `--resolution nan`', lambda d: _carmen(d, '--resolution', 'nan'),
          ('--resolution', 'number > 0')),
-    Case('convert-carmen `--resolution 1e-5` (a 10^10-cell grid)',
+    Case('convert-carmen `--resolution 1e-5` (a grid of 8e11 cells)',
          lambda d: _carmen(d, '--resolution', '1e-5'), ('grid at resolution 1e-05', 'exceeds')),
     Case('convert-carmen `-o` naming a regular file',
          lambda d: _write(d, 'out', 'x') and _carmen(d), ('output directory out', 'not a directory')),
