@@ -15,13 +15,18 @@ ProgressCallback = Callable[[int, int, str], None]
 
 class TqdmProgress:
     """A :data:`ProgressCallback` drawn as a tqdm bar on stderr; a new ``label`` or ``total``
-    starts the bar over (a job reporting several stages). ``enabled=False`` draws nothing."""
+    starts the bar over (a job reporting several stages). ``enabled=False`` draws nothing; nor
+    does a job that fails before its first report (its error stays the only line)."""
 
     def __init__(self, label: str = '', enabled: bool = True):
         self._label = label
-        self._bar = tqdm(desc=label, disable=not enabled, leave=True, dynamic_ncols=True)
+        self._enabled = enabled
+        self._bar: tqdm | None = None
 
     def __call__(self, done: int, total: int, label: str = '') -> None:
+        if self._bar is None:
+            self._bar = tqdm(desc=self._label, disable=not self._enabled, leave=True,
+                             dynamic_ncols=True)
         bar = self._bar
         if (total and total != bar.total) or (label and label != self._label):
             self._label = label or self._label
@@ -30,7 +35,8 @@ class TqdmProgress:
         bar.update(done - bar.n)
 
     def close(self) -> None:
-        self._bar.close()
+        if self._bar is not None:
+            self._bar.close()
 
     def __enter__(self) -> 'TqdmProgress':
         return self

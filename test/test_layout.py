@@ -22,6 +22,7 @@ LAZY_OWN = {(f'{PKG}.cli.play_cmd', f'{PKG}.ros.play')}   # rclpy only for `ssm_
 MAX_FUNCTION_IMPORTS = 10
 #: data flows one way: a module imports only from lower layers (or its own subpackage)
 LAYERS = [
+    {'files'},
     {'transforms', 'progress', 'config'},
     {'matching'},
     {'mapping'},
@@ -230,7 +231,7 @@ def test_checks_find_a_broken_layout(tmp_path):
     found = '\n'.join(violations(build_graph(root)))
     assert 'import cycle: ssm_localization.matching.matcher -> ssm_localization.matching.scan' \
         in found
-    assert 'ssm_localization.mapping.index:1: mapping (layer 2) imports ' \
+    assert 'ssm_localization.mapping.index:1: mapping (layer 3) imports ' \
            'ssm_localization.localization.localizer' in found
     assert 'ssm_localization.localization.localizer:1: the ROS-free core imports rclpy' in found
     assert 'ssm_localization.io.bags:2: function-level import of numpy' in found

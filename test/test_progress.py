@@ -23,3 +23,12 @@ def test_disabled_bar_prints_nothing(capsys):
         for i in range(5):
             bar(i, 5, 'x')
     assert capsys.readouterr().err == ''
+
+
+def test_a_job_that_fails_before_its_first_report_prints_nothing(capsys):
+    try:
+        with TqdmProgress('convert'):
+            raise ValueError('bad input')
+    except ValueError:
+        pass
+    assert capsys.readouterr().err == ''       # the error line stays the only line

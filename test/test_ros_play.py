@@ -103,5 +103,7 @@ def test_play_cli_arguments():
                               '--ros-args', '-r', 'scan:=front/scan'])
     assert args.rate == 0 and args.loop and args.topics == ['/scan', '/map']
     assert args.ros_args == ['-r', 'scan:=front/scan']
-    with pytest.raises(ValueError):
-        play_cmd.run(parser.parse_args(['bags/x', '--rate', '-1']))
+    for bad in (['--rate', '-1'], ['--rate', 'nan'], ['--duration', '-2']):   # refused when parsed
+        with pytest.raises(SystemExit) as info:
+            parser.parse_args(['bags/x', *bad])
+        assert info.value.code == 2

@@ -2,14 +2,23 @@
 
 Each subcommand module exposes ``add_arguments(parser)`` and ``run(args) -> int``. Only
 ``play`` needs ROS (rclpy is imported when it runs) and only ``--plot`` needs matplotlib.
+
+User errors end in one line on stderr, ``ssm_localization COMMAND: error: ...``, and exit
+status 2: bad arguments (argparse), and the ``ValueError`` / ``OSError`` (missing, unreadable
+or unwritable files) that the library raises at its boundaries, naming the file or field.
+Subcommands check their output paths before they start working.
 """
 from __future__ import annotations
 
 import argparse
 import sys
 
+from ..files.reading import clip
 from . import (bench_cmd, carmen_cmd, index_cmd, match_cmd, play_cmd, replay_cmd,
                simulate_cmd)
+
+#: longest error line printed (messages that echo input are clipped where they are made too)
+MAX_ERROR_CHARS = 600
 
 # name -> (subcommand module, one-line help)
 COMMANDS = {
@@ -23,8 +32,27 @@ COMMANDS = {
 }
 
 
+class Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line (``PROG: error: ...``, status 2);
+    ``--help`` still shows the usage. Subcommand parsers are of this class too."""
+
+    def error(self, message: str):
+        self.exit(2, f'{self.prog}: error: {clip(message, MAX_ERROR_CHARS)} '
+                     f'(see {self.prog} --help)\n')
+
+
+def error_text(exc: BaseException) -> str:
+    """One line for a user error: an ``OSError`` as ``file: reason``, else the message."""
+    if isinstance(exc, OSError) and exc.strerror:
+        names = ' -> '.join(str(n) for n in (exc.filename, exc.filename2) if n is not None)
+        text = f'{names}: {exc.strerror}' if names else exc.strerror
+    else:
+        text = str(exc) or type(exc).__name__
+    return clip(text, MAX_ERROR_CHARS)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog='ssm_localization',
         description='Single-scan global localization with spectral scan matching.')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
@@ -41,8 +69,8 @@ def main(argv: list[str] | None = None) -> int:
         return int(args._run(args) or 0)
     except KeyboardInterrupt:
         return 130
-    except (FileNotFoundError, ValueError) as exc:  # user errors: one clear line, no traceback
-        print(f'ssm_localization {args.command}: error: {exc}', file=sys.stderr)
+    except (OSError, ValueError) as exc:  # user errors: one clear line, no traceback
+        print(f'ssm_localization {args.command}: error: {error_text(exc)}', file=sys.stderr)
         return 2
 
 

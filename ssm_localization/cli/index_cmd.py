@@ -5,10 +5,12 @@ import argparse
 import time
 
 from ..config.params import load_index_config
-from ..evaluation.plotting import plot_index
+from ..evaluation.plotting import check_plot_path, plot_index
+from ..files.writing import check_output_file
 from ..mapping.index import build_index, save_index
 from ..mapping.map_io import load_map_yaml
 from ..progress import TqdmProgress
+from .arguments import add_max_map_cells
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -17,12 +19,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--params', help='YAML params: flat IndexConfig/TopologyConfig names or '
                                          'a ROS params file (map_indexer: ros__parameters:)')
     parser.add_argument('--plot', help='also draw map, GVD and nodes to this PNG')
+    add_max_map_cells(parser)
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output_file(args.output, 'index file')
+    if args.plot:
+        check_plot_path(args.plot)
     config = load_index_config(args.params) if args.params else None
-    occ_map = load_map_yaml(args.map)
+    occ_map = load_map_yaml(args.map, max_cells=args.max_map_cells)
     t0 = time.perf_counter()
     with TqdmProgress('index', enabled=not args.quiet) as bar:
         index = build_index(occ_map, config, progress=bar)

@@ -10,25 +10,30 @@ from pathlib import Path
 import numpy as np
 
 from ..config.matcher import MatcherConfig
-from ..evaluation.plotting import plot_match
+from ..evaluation.plotting import check_plot_path, plot_match
 from ..io.carmen import read_carmen_log
 from ..matching.matcher import match_scans
 from ..transforms import apply, compose, inverse, wrap_angle
+from .arguments import finite_float, nonnegative_int, positive_int
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('log', type=Path, help='CARMEN log (.log or .log.gz)')
-    parser.add_argument('--k', type=int, default=0, help='reference scan index (default 0)')
+    parser.add_argument('--k', type=nonnegative_int, default=0,
+                        help='reference scan index (default 0)')
     parser.add_argument('--s', type=int, default=1, help='new scan = k + s (default 1)')
-    parser.add_argument('--offset', type=float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
+    parser.add_argument('--offset', type=finite_float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
                         default=None, help='extra rigid offset applied to the new scan')
-    parser.add_argument('--max-points', type=int, default=None, help='matcher point budget')
+    parser.add_argument('--max-points', type=positive_int, default=None,
+                        help='matcher point budget')
     parser.add_argument('--no-icp', action='store_true', help='skip the ICP refinement')
-    parser.add_argument('--seed', type=int, default=0, help='RANSAC seed')
+    parser.add_argument('--seed', type=nonnegative_int, default=0, help='RANSAC seed')
     parser.add_argument('--plot', type=Path, default=None, help='write a PNG of the match')
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.plot:
+        check_plot_path(args.plot)
     log = read_carmen_log(args.log)
     j = args.k + args.s
     if not (0 <= args.k < len(log) and 0 <= j < len(log)):

@@ -2,33 +2,37 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ..config.simulation import SimulationConfig
+from ..files.writing import check_output_dir
 from ..io.simulate import simulate_bag
 from ..mapping.map_io import load_map_yaml
 from ..progress import TqdmProgress
+from .arguments import (add_max_map_cells, finite_float, fraction, nonnegative_float,
+                        nonnegative_int, positive_float, positive_int)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('map', help='map_server map (YAML + image)')
     parser.add_argument('-o', '--out', required=True, help='output bag directory')
-    parser.add_argument('-n', '--count', type=int, default=50, help='number of scans')
-    parser.add_argument('--fov', type=float, default=360.0,
+    parser.add_argument('-n', '--count', type=positive_int, default=50, help='number of scans')
+    parser.add_argument('--fov', type=positive_float, default=360.0,
                         help='field of view, degrees, centred forward')
-    parser.add_argument('--beams', type=int, default=360, help='beams per scan')
-    parser.add_argument('--max-range', type=float, default=30.0, help='sensor range, m')
-    parser.add_argument('--noise', type=float, default=0.01, help='range noise sigma, m')
-    parser.add_argument('--clearance', type=float, default=0.3,
+    parser.add_argument('--beams', type=positive_int, default=360, help='beams per scan')
+    parser.add_argument('--max-range', type=positive_float, default=30.0, help='sensor range, m')
+    parser.add_argument('--noise', type=nonnegative_float, default=0.01,
+                        help='range noise sigma, m')
+    parser.add_argument('--clearance', type=nonnegative_float, default=0.3,
                         help='minimum distance of the robot to obstacles/unknown, m')
-    parser.add_argument('--clutter', type=int, default=0,
+    parser.add_argument('--clutter', type=nonnegative_int, default=0,
                         help='unmapped discs (r 0.1-0.3 m, 1-4 m away) per scan')
-    parser.add_argument('--short-fraction', type=float, default=0.0,
+    parser.add_argument('--short-fraction', type=fraction, default=0.0,
                         help='fraction of beams replaced by random short readings')
-    parser.add_argument('--sensor-offset', type=float, nargs=3, default=(0.0, 0.0, 0.0),
+    parser.add_argument('--sensor-offset', type=finite_float, nargs=3, default=(0.0, 0.0, 0.0),
                         metavar=('X', 'Y', 'YAW'), help='laser pose on the base (m, m, rad)')
-    parser.add_argument('--seed', type=int, default=0, help='random seed')
+    parser.add_argument('--seed', type=nonnegative_int, default=0, help='random seed')
     parser.add_argument('--force', action='store_true', help='overwrite an existing bag')
+    add_max_map_cells(parser)
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
@@ -39,9 +43,8 @@ def run(args: argparse.Namespace) -> int:
                            short_fraction=args.short_fraction,
                            sensor_offset=tuple(args.sensor_offset), seed=args.seed)
     cfg.validate()
-    if Path(args.out).exists() and not args.force:
-        raise ValueError(f'bag exists already (use --force to overwrite): {args.out}')
-    occ_map = load_map_yaml(args.map)
+    check_output_dir(args.out, 'bag', overwrite=args.force)
+    occ_map = load_map_yaml(args.map, max_cells=args.max_map_cells)
     with TqdmProgress('simulate', enabled=not args.quiet) as bar:
         sim = simulate_bag(occ_map, args.out, cfg, overwrite=args.force, progress=bar)
     print(f'bag: {args.out} ({len(sim.scans)} scans, {cfg.beams} beams, fov {cfg.fov_deg:g} deg)')

@@ -1,7 +1,7 @@
 """Configuration dataclasses and YAML params files.
 
-Modules here import nothing from the rest of the package, so every layer can take its settings
-from here without an import cycle.
+Modules here import nothing from the rest of the package but ``files/`` (bounded YAML reading),
+so every layer can take its settings from here without an import cycle.
 """
 from .localization import LocalizerConfig
 from .mapping import IndexConfig, MapBuildConfig, TopologyConfig

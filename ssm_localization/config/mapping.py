@@ -93,3 +93,20 @@ class MapBuildConfig:
     occupied_ratio: float = param(0.3, 'occupied if hits >= ratio * (hits + misses)')
     min_hits: int = param(1, 'a cell with fewer hits is never occupied')
     chunk_beams: int = param(20000, 'beams traversed per vectorized batch')
+
+    def __post_init__(self) -> None:
+        for name, low, strict in (('resolution', 0.0, True), ('margin', 0.0, False),
+                                  ('max_range', 0.0, True), ('free_cap', 0.0, False)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v)
+                    and (v > low if strict else v >= low)):
+                raise ValueError(f'MapBuildConfig.{name}: expected a number '
+                                 f'{">" if strict else ">="} {low:g}, got {v!r}')
+        if not (isinstance(self.occupied_ratio, (int, float))
+                and 0.0 <= self.occupied_ratio <= 1.0):
+            raise ValueError(f'MapBuildConfig.occupied_ratio: expected 0..1, got '
+                             f'{self.occupied_ratio!r}')
+        for name in ('min_hits', 'chunk_beams'):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ValueError(f'MapBuildConfig.{name}: expected an integer >= 1, got {v!r}')

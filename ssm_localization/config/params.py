@@ -1,4 +1,4 @@
-"""Config dataclasses from YAML parameter files (``yaml.safe_load`` only).
+"""Config dataclasses from YAML parameter files (a ``yaml.SafeLoader`` subclass only).
 
 One file serves the CLI and the ROS nodes: either a plain mapping, or a ROS 2 params file whose
 ``<node>: ros__parameters:`` section is used. Nested mappings follow the dataclass nesting, e.g.::
@@ -9,18 +9,21 @@ One file serves the CLI and the ROS nodes: either a plain mapping, or a ROS 2 pa
         index: {beams: 360, topology: {arc_spacing: 2.5}, matcher: {max_points: 100}}
 
 ROS flattens nested mappings to dotted names (``localizer.top_n``); :func:`unflatten` undoes it.
-Unknown keys raise ``ValueError`` naming the key, so typos do not pass silently.
+Unknown keys raise ``ValueError`` naming the key, so typos do not pass silently; so does a file
+of the wrong shape (a list where a mapping belongs, a string for a number). Files are read with
+``files.yaml_input.load_yaml_file``: size and alias limits, no Python objects.
 """
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
-import yaml
-
+from ..files.reading import echo
+from ..files.yaml_input import load_yaml_file
 from .localization import LocalizerConfig
 from .mapping import IndexConfig, TopologyConfig
 
@@ -28,18 +31,24 @@ T = TypeVar('T')
 
 
 def load_yaml_mapping(path: str | Path) -> dict:
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f'params file not found: {path}')
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ValueError(f'{path}: malformed YAML: {exc}') from None
+    """The top-level mapping of a params file (``{}`` for an empty file); ``ValueError`` naming
+    the file for anything else, ``FileNotFoundError`` when it is missing."""
+    data = load_yaml_file(path, 'params file')
     if data is None:
         return {}
     if not isinstance(data, dict):
-        raise ValueError(f'{path}: expected a mapping at the top level')
+        raise ValueError(f'{path}: expected a mapping at the top level, got '
+                         f'{type(data).__name__}')
     return data
+
+
+def _mapping(value: Any, name: str) -> dict:
+    """``value`` if it is a mapping (``{}`` for None), else ``ValueError`` naming ``name``."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ValueError(f'{name} must be a mapping, got {echo(value)}')
+    return value
 
 
 def node_section(data: dict, node: str) -> dict:
@@ -47,7 +56,7 @@ def node_section(data: dict, node: str) -> dict:
     for key in (node, '/' + node, '/**', '**'):
         section = data.get(key)
         if isinstance(section, dict) and 'ros__parameters' in section:
-            return section['ros__parameters'] or {}
+            return _mapping(section['ros__parameters'], f'{key}: ros__parameters')
     if any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values()):
         return {}
     return data
@@ -57,10 +66,14 @@ def unflatten(flat: dict[str, Any]) -> dict:
     """``{'a.b': 1}`` -> ``{'a': {'b': 1}}``."""
     out: dict = {}
     for key, value in flat.items():
-        parts = key.split('.')
+        parts = str(key).split('.')
         cur = out
         for p in parts[:-1]:
             cur = cur.setdefault(p, {})
+            if not isinstance(cur, dict):
+                raise ValueError(f'parameter {echo(key)}: {p!r} is also given a value')
+        if isinstance(cur.get(parts[-1]), dict) and not isinstance(value, dict):
+            raise ValueError(f'parameter {echo(key)} is also a group of parameters')
         cur[parts[-1]] = value
     return out
 
@@ -80,13 +93,13 @@ def flatten(obj: Any, prefix: str = '') -> dict[str, Any]:
 
 def from_dict(cls: type[T], data: dict | None, where: str = '') -> T:
     """Build dataclass ``cls`` from a (nested) mapping, checking keys and coercing simple types."""
-    data = dict(data or {})
+    data = dict(_mapping(data, f'parameters {where.rstrip(".") or cls.__name__}'))
     hints = typing.get_type_hints(cls)
     kwargs = {}
     names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - names)
+    unknown = sorted(str(k) for k in set(data) - names)
     if unknown:
-        raise ValueError(f'unknown parameter {where}{unknown[0]!r} for {cls.__name__} '
+        raise ValueError(f'unknown parameter {where}{echo(unknown[0])} for {cls.__name__} '
                          f'(known: {", ".join(sorted(names))})')
     defaults = cls()
     for f in dataclasses.fields(cls):
@@ -141,16 +154,23 @@ def _coerce(value: Any, default: Any, hint: Any, name: str) -> Any:
             return value
     except (TypeError, ValueError, OverflowError):
         raise ValueError(f'parameter {name}: expected {type(default).__name__} like '
-                         f'{default!r}, got {value!r}') from None
+                         f'{default!r}, got {echo(value)}') from None
     return value
 
 
 def laser_pose_of_section(section: dict) -> tuple[float, float, float] | None:
     """The nodes' ``laser_x/laser_y/laser_yaw`` parameters as a pose, None when none is set."""
-    values = [section.get(k) for k in ('laser_x', 'laser_y', 'laser_yaw')]
+    names = ('laser_x', 'laser_y', 'laser_yaw')
+    values = [section.get(k) for k in names]
     if all(v is None for v in values):
         return None
-    return tuple(float(v or 0.0) for v in values)
+    pose = []
+    for name, v in zip(names, values):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
+                              or not math.isfinite(v)):
+            raise ValueError(f'parameter {name}: expected a finite number, got {echo(v)}')
+        pose.append(float(v or 0.0))
+    return tuple(pose)
 
 
 #: keys of a flat params file; a ROS params file may also hold the nodes' own parameters
@@ -161,13 +181,13 @@ def load_configs(path: str | Path | None, node: str = 'global_localizer'):
     """``(IndexConfig, LocalizerConfig)`` from a params file (defaults where absent)."""
     data = load_yaml_mapping(path) if path else {}
     ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
-    section = node_section(data, node)
     try:
+        section = node_section(data, node)
         if any('.' in str(k) for k in section):
             section = unflatten({str(k): v for k, v in section.items()})
         unknown = sorted(str(k) for k in section if k not in KNOWN_TOP_LEVEL)
         if unknown and not ros_file:
-            raise ValueError(f'unknown parameter {unknown[0]!r} (known: index, localizer, '
+            raise ValueError(f'unknown parameter {echo(unknown[0])} (known: index, localizer, '
                              'laser_x, laser_y, laser_yaw)')
         index_cfg = from_dict(IndexConfig, section.get('index'), 'index.')
         loc_cfg = from_dict(LocalizerConfig, section.get('localizer'), 'localizer.')
@@ -181,7 +201,7 @@ def load_configs(path: str | Path | None, node: str = 'global_localizer'):
 
 
 def load_index_config(path: str | Path) -> IndexConfig:
-    """:class:`IndexConfig` from a YAML params file (``yaml.safe_load``).
+    """:class:`IndexConfig` from a YAML params file (see :func:`load_yaml_mapping`).
 
     Accepts a flat mapping of IndexConfig / TopologyConfig field names (nested ``topology:`` and
     ``matcher:`` mappings allowed), a ROS params file ``map_indexer: ros__parameters: {...}``
@@ -189,6 +209,14 @@ def load_index_config(path: str | Path) -> IndexConfig:
     ``global_localizer`` params file with an ``index:`` section.
     """
     data = load_yaml_mapping(path)
+    try:
+        return _index_config_of(data)
+    except ValueError as exc:
+        raise ValueError(f'{path}: {exc}') from None
+
+
+def _index_config_of(data: dict) -> IndexConfig:
+    """:func:`load_index_config` on the loaded file."""
     ros = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
     section = node_section(data, 'map_indexer') if ros else data
     if ros and not section:
@@ -196,11 +224,11 @@ def load_index_config(path: str | Path) -> IndexConfig:
     if any('.' in str(key) for key in section):
         section = unflatten(section)
     laser = laser_pose_of_section(section)
-    if isinstance(section.get('index'), dict):
-        section = section['index']
+    if 'index' in section:
+        section = _mapping(section['index'], 'parameters index')
     idx_names = {f.name for f in dataclasses.fields(IndexConfig)}
     topo_names = {f.name for f in dataclasses.fields(TopologyConfig)}
-    topo = dict(section.get('topology') or {})
+    topo = dict(_mapping(section.get('topology'), 'parameters topology'))
     kwargs = {}
     for key, value in section.items():
         if key == 'topology':
@@ -215,7 +243,4 @@ def load_index_config(path: str | Path) -> IndexConfig:
         kwargs['topology'] = topo
     if laser is not None:           # the nodes' laser_x/y/yaw: the laser on the base
         kwargs['sensor_pose'] = list(laser)
-    try:
-        return from_dict(IndexConfig, kwargs)
-    except ValueError as exc:
-        raise ValueError(f'{path}: {exc}') from None
+    return from_dict(IndexConfig, kwargs)

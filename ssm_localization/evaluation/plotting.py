@@ -1,12 +1,39 @@
-"""Figures people would rather see than read (PNG via matplotlib, imported on first use)."""
+"""Figures people would rather see than read (PNG via matplotlib, imported on first use).
+
+Figures are written atomically (nothing is left behind when saving fails); callers check the
+path first with :func:`check_plot_path`, before the work that the figure shows.
+"""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
+from ..files.writing import atomic_files, check_output_file
 from ..mapping.topology import NODE_KIND_NAMES
 from ..transforms import apply
+
+#: file name endings matplotlib writes (the format follows the ending)
+PLOT_SUFFIXES = ('.png', '.pdf', '.svg', '.svgz', '.jpg', '.jpeg', '.tif', '.tiff', '.webp',
+                 '.eps', '.ps')
+
+
+def check_plot_path(path: str | Path) -> Path:
+    """``path`` after checking a figure can be written there (``ValueError`` otherwise)."""
+    p = check_output_file(path, 'plot file')
+    if p.suffix.lower() not in PLOT_SUFFIXES:
+        raise ValueError(f'plot file {p}: expected a name ending in {", ".join(PLOT_SUFFIXES)}')
+    return p
+
+
+def _save(plt, fig, path: str | Path, dpi: int) -> Path:
+    """Write ``fig`` to ``path`` atomically and close it."""
+    try:
+        with atomic_files(check_plot_path(path), what='plot file') as (tmp,):
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)
+    return Path(path)
 
 
 def _pyplot():
@@ -56,8 +83,7 @@ def plot_replay(index, rows, path, title: str = '') -> None:
     ax.legend(loc='upper right', fontsize=8)
     ax.set_aspect('equal')
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(plt, fig, path, dpi=110)
 
 
 def plot_index(index, path, title: str = '', show_ids: bool = True) -> None:
@@ -89,8 +115,7 @@ def plot_index(index, path, title: str = '', show_ids: bool = True) -> None:
         ax.legend(loc='upper right', fontsize=8)
     ax.set_aspect('equal')
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    _save(plt, fig, path, dpi=120)
 
 
 def plot_match(ref_xy, new_xy, pose, out, pairs=None, truth=None, title: str = ''):
@@ -133,8 +158,4 @@ def plot_match(ref_xy, new_xy, pose, out, pairs=None, truth=None, title: str = '
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return _save(plt, fig, out, dpi=110)

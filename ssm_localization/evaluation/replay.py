@@ -10,6 +10,7 @@ from typing import Iterable, Sequence
 import numpy as np
 from tqdm import tqdm
 
+from ..files.writing import atomic_files
 from ..localization.localizer import GlobalLocalizer, Localization
 from ..transforms import Pose2, wrap_angle
 
@@ -112,9 +113,9 @@ def summarize(rows: Sequence[ResultRow]) -> Summary:
 
 
 def write_results_csv(rows: Iterable[ResultRow], path: str | Path) -> None:
-    """RESULTS.csv: the INTERFACES.md columns first, ground truth after."""
+    """RESULTS.csv: the INTERFACES.md columns first, ground truth after (written atomically)."""
     names = [f.name for f in fields(ResultRow)]
-    with open(path, 'w', newline='') as fh:
+    with atomic_files(path, what='results file') as (tmp,), open(tmp, 'w', newline='') as fh:
         w = csv.DictWriter(fh, fieldnames=names)
         w.writeheader()
         for r in rows:

@@ -12,7 +12,9 @@ from typing import Iterator
 
 import numpy as np
 
+from ..files.yaml_input import load_yaml_file
 from ..mapping.map_io import OccupancyMap, occupancy_map_from_msg
+from ..mapping.map_limits import MAX_MAP_CELLS
 from ..progress import ProgressCallback
 from ..transforms import Pose2, quaternion_to_yaw
 from .bag_records import (GT_TOPIC, MAP_TOPIC, ODOM_TOPIC, SCAN_TOPIC, SCAN_TYPE, BagData,
@@ -33,7 +35,14 @@ def _resolve(path: str | Path) -> Path:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f'bag not found: {path}')
-    if path.is_dir() and not (path / 'metadata.yaml').exists():
+    if not (path.is_dir() or path.is_file()):
+        raise BagError(f'{path}: not a rosbag2 directory or a regular .mcap file')
+    metadata = path / 'metadata.yaml'
+    if path.is_dir() and metadata.exists():
+        # rosbags parses it too: refuse oversized files and alias bombs before it does
+        if not isinstance(load_yaml_file(metadata, 'bag metadata'), dict):
+            raise BagError(f'{metadata}: bag metadata is not a mapping')
+    if path.is_dir() and not metadata.exists():
         mcaps = sorted(path.glob('*.mcap'))
         if len(mcaps) != 1:
             raise BagError(f'{path}: not a rosbag2 directory (no metadata.yaml) and holds '
@@ -158,10 +167,11 @@ def _scan_record(msg) -> ScanRecord:
                       frame_id=str(msg.header.frame_id))
 
 
-def _map_from_msg(msg) -> OccupancyMap:
+def _map_from_msg(msg, max_cells: int) -> OccupancyMap:
     """OccupancyGrid -> OccupancyMap; the float32 resolution is restored to its shortest decimal
-    (0.05, not 0.0500000007) so the map equals (and checksums like) the YAML it was made from."""
-    m = occupancy_map_from_msg(msg)
+    (0.05, not 0.0500000007) so the map equals (and checksums like) the YAML it was made from.
+    Maps of more than ``max_cells`` cells (0: no limit) are refused before conversion."""
+    m = occupancy_map_from_msg(msg, max_cells)
     res = float(repr(np.float32(m.resolution)).removeprefix('np.float32(').rstrip(')'))
     return OccupancyMap(m.data, res, m.origin, m.frame_id)
 
@@ -186,12 +196,15 @@ def iter_scans(path: str | Path, scan_topic: str = SCAN_TOPIC,
 
 
 def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
-             progress: ProgressCallback | None = None, require_scans: bool = True) -> BagData:
+             progress: ProgressCallback | None = None, require_scans: bool = True,
+             max_map_cells: int = MAX_MAP_CELLS) -> BagData:
     """Read a whole bag: the first /map, every scan, /ground_truth and /odom poses.
 
     Raises ``FileNotFoundError`` for a missing path, ``BagError`` (a ``ValueError``) for a bag
-    that cannot be opened or lacks ``scan_topic`` (unless ``require_scans=False``). A bag cut
-    short mid-file yields its readable prefix with a ``RuntimeWarning``.
+    that cannot be opened or lacks ``scan_topic`` (unless ``require_scans=False``),
+    :class:`~ssm_localization.mapping.map_limits.MapTooLargeError` for a /map of more than
+    ``max_map_cells`` cells (0: no limit). A bag cut short mid-file yields its readable prefix
+    with a ``RuntimeWarning``.
     """
     rd = _Reader(path)
     try:
@@ -204,7 +217,10 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
             if topic == scan_topic:
                 scans.append(_scan_record(msg))
             elif topic == MAP_TOPIC and occ_map is None:
-                occ_map = _map_from_msg(msg)
+                try:
+                    occ_map = _map_from_msg(msg, max_map_cells)
+                except ValueError as exc:
+                    raise type(exc)(f'{rd.path}: {MAP_TOPIC}: {exc}') from None
             elif topic == GT_TOPIC:
                 gt[_stamp_of(msg.header)] = _pose_of(msg.pose)
             elif topic == ODOM_TOPIC:

@@ -6,12 +6,12 @@ transient-local, then per scan ``/scan``, ``/ground_truth`` and ``/odom``.
 from __future__ import annotations
 
 import math
-import shutil
 from pathlib import Path
 from typing import Iterable, Mapping
 
 import numpy as np
 
+from ..files.writing import atomic_dir
 from ..mapping.map_io import OccupancyMap
 from ..progress import ProgressCallback
 from ..transforms import Pose2, yaw_to_quaternion
@@ -89,17 +89,14 @@ def write_bag(path: str | Path, map: OccupancyMap | None = None,
     for the stamps present in those mappings (matched to the scans' stamps to the nanosecond).
     Message log times are the header stamps, forced strictly increasing so bag order is scan order.
     ``compress`` zstd-compresses the mcap chunks (read natively by the Jazzy mcap plugin).
+    The bag is written beside ``path`` and moved into place when complete: a failure leaves
+    nothing behind (and an existing bag untouched).
     """
     from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
     path = Path(path)
-    if path.exists():
-        if not overwrite:
-            raise FileExistsError(f'bag exists already (pass overwrite=True): {path}')
-        if path.is_dir():
-            shutil.rmtree(path)
-        else:
-            path.unlink()
+    if (path.exists() or path.is_symlink()) and not overwrite:
+        raise FileExistsError(f'bag exists already (pass overwrite=True): {path}')
     scans = list(scans)
     for s in scans:
         if not math.isfinite(s.stamp) or np.ndim(s.ranges) != 1:
@@ -118,37 +115,40 @@ def write_bag(path: str | Path, map: OccupancyMap | None = None,
         last_ns = max(stamp_to_ns(stamp), last_ns + 1, 0)
         return last_ns
 
-    writer = Writer(path, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
-    if compress:
-        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
-    with writer:
-        if map is not None:
-            conn = writer.add_connection(MAP_TOPIC, MAP_TYPE, typestore=ts,
-                                         offered_qos_profiles=_latched_qos())
-            last_ns = max(stamp_to_ns(min(map_stamp, first)) - 1_000_000, 0)
-            writer.write(conn, last_ns, ts.serialize_cdr(_map_msg(ts, map, map_stamp), MAP_TYPE))
-        c_scan = writer.add_connection(SCAN_TOPIC, SCAN_TYPE, typestore=ts) if scans else None
-        c_gt = writer.add_connection(GT_TOPIC, GT_TYPE, typestore=ts) if gt else None
-        c_od = writer.add_connection(ODOM_TOPIC, ODOM_TYPE, typestore=ts) if od else None
-        for i, s in enumerate(scans):
-            t = log_time(s.stamp)
-            key = stamp_to_ns(s.stamp)
-            writer.write(c_scan, t, ts.serialize_cdr(_scan_msg(ts, s), SCAN_TYPE))
-            if key in gt:
-                msg = ts.types[GT_TYPE](header=_header(ts, s.stamp, 'map'),
-                                        pose=_pose_msg(ts, gt.pop(key)))
-                writer.write(c_gt, t, ts.serialize_cdr(msg, GT_TYPE))
-            if key in od:
-                msg = _odom_msg(ts, s.stamp, od.pop(key), odom_frame, base_frame)
-                writer.write(c_od, t, ts.serialize_cdr(msg, ODOM_TYPE))
-            if progress is not None and (i % 50 == 0 or i + 1 == len(scans)):
-                progress(i + 1, len(scans), 'writing bag')
-        for key in sorted(gt):   # poses without a scan
-            stamp = key * 1e-9
-            msg = ts.types[GT_TYPE](header=_header(ts, stamp, 'map'), pose=_pose_msg(ts, gt[key]))
-            writer.write(c_gt, log_time(stamp), ts.serialize_cdr(msg, GT_TYPE))
-        for key in sorted(od):
-            stamp = key * 1e-9
-            msg = _odom_msg(ts, stamp, od[key], odom_frame, base_frame)
-            writer.write(c_od, log_time(stamp), ts.serialize_cdr(msg, ODOM_TYPE))
+    with atomic_dir(path, 'bag', overwrite) as stage:   # all or nothing
+        writer = Writer(stage, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
+        if compress:
+            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        with writer:
+            if map is not None:
+                conn = writer.add_connection(MAP_TOPIC, MAP_TYPE, typestore=ts,
+                                             offered_qos_profiles=_latched_qos())
+                last_ns = max(stamp_to_ns(min(map_stamp, first)) - 1_000_000, 0)
+                writer.write(conn, last_ns,
+                             ts.serialize_cdr(_map_msg(ts, map, map_stamp), MAP_TYPE))
+            c_scan = writer.add_connection(SCAN_TOPIC, SCAN_TYPE, typestore=ts) if scans else None
+            c_gt = writer.add_connection(GT_TOPIC, GT_TYPE, typestore=ts) if gt else None
+            c_od = writer.add_connection(ODOM_TOPIC, ODOM_TYPE, typestore=ts) if od else None
+            for i, s in enumerate(scans):
+                t = log_time(s.stamp)
+                key = stamp_to_ns(s.stamp)
+                writer.write(c_scan, t, ts.serialize_cdr(_scan_msg(ts, s), SCAN_TYPE))
+                if key in gt:
+                    msg = ts.types[GT_TYPE](header=_header(ts, s.stamp, 'map'),
+                                            pose=_pose_msg(ts, gt.pop(key)))
+                    writer.write(c_gt, t, ts.serialize_cdr(msg, GT_TYPE))
+                if key in od:
+                    msg = _odom_msg(ts, s.stamp, od.pop(key), odom_frame, base_frame)
+                    writer.write(c_od, t, ts.serialize_cdr(msg, ODOM_TYPE))
+                if progress is not None and (i % 50 == 0 or i + 1 == len(scans)):
+                    progress(i + 1, len(scans), 'writing bag')
+            for key in sorted(gt):   # poses without a scan
+                stamp = key * 1e-9
+                msg = ts.types[GT_TYPE](header=_header(ts, stamp, 'map'),
+                                        pose=_pose_msg(ts, gt[key]))
+                writer.write(c_gt, log_time(stamp), ts.serialize_cdr(msg, GT_TYPE))
+            for key in sorted(od):
+                stamp = key * 1e-9
+                msg = _odom_msg(ts, stamp, od[key], odom_frame, base_frame)
+                writer.write(c_od, log_time(stamp), ts.serialize_cdr(msg, ODOM_TYPE))
     return path

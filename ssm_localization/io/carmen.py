@@ -11,16 +11,21 @@ corrected pose, so the increment between scans k and k+1 is ``inverse(reset_k) *
 from __future__ import annotations
 
 import gzip
+import shutil
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from ..config.mapping import MapBuildConfig
+from ..files.reading import clip, input_file
+from ..files.writing import check_output_dir, check_output_file
 from ..mapping.grid import build_grid_map
 from ..mapping.map_io import OccupancyMap, save_map_yaml
+from ..mapping.map_limits import MAX_MAP_CELLS
 from ..progress import ProgressCallback
 from ..transforms import apply, compose, inverse
 from .bag_records import ScanRecord
@@ -28,6 +33,8 @@ from .bag_writer import write_bag
 
 #: no-return readings of the shared logs (the sensor maximum), by file-name prefix
 NO_RETURN = {'intel': 81.83, 'aces': 50.0, 'freiburg-079': 81.91}
+#: longest line read from a log (a FLASER line of 361 readings is about 3 kB)
+MAX_LINE_CHARS = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -65,16 +72,28 @@ def _no_return_for(path: Path, ranges: np.ndarray) -> float:
     return float(np.max(ranges)) if ranges.size else np.inf
 
 
+def _log_lines(path: Path) -> Iterator[tuple[int, str]]:
+    """``(line number, line)`` of a text or gzipped log; ``ValueError`` naming the file for
+    binary garbage, a corrupt gzip stream or a line longer than :data:`MAX_LINE_CHARS`."""
+    opener = gzip.open if path.suffix == '.gz' else open
+    try:
+        with opener(path, 'rt', encoding='utf-8') as fh:
+            for lineno, line in enumerate(iter(lambda: fh.readline(MAX_LINE_CHARS + 1), ''), 1):
+                if len(line) > MAX_LINE_CHARS:
+                    raise ValueError(f'{path}:{lineno}: line longer than {MAX_LINE_CHARS} '
+                                     f'characters; not a CARMEN log?')
+                yield lineno, line
+    except (OSError, EOFError, zlib.error, UnicodeDecodeError) as exc:
+        raise ValueError(f'CARMEN log {path}: cannot read ({clip(exc)})') from None
+
+
 def read_carmen_log(path: str | Path, max_range: float | None = None) -> CarmenLog:
     """Parse the FLASER lines of a (optionally gzipped) CARMEN log.
 
     Readings ``>= max_range`` (default: the log's known no-return value) become ``+inf``.
     Raises ``ValueError`` naming the file and line for malformed lines.
     """
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f'CARMEN log not found: {path}')
-    opener = gzip.open if path.suffix == '.gz' else open
+    path = input_file(path, 'CARMEN log')
     rows, poses, stamps, odometry = [], [], [], []
     n_beams = None
     odo = None            # raw odometry at the last FLASER line
@@ -82,47 +101,46 @@ def read_carmen_log(path: str | Path, max_range: float | None = None) -> CarmenL
     last = None           # the latest ODOM pose
     prev_raw = prev_pose = None   # the latest ODOM pose and the corrected pose at the last scan
     have_odom = True
-    with opener(path, 'rt') as fh:
-        for lineno, line in enumerate(fh, 1):
-            if line.startswith('ODOM'):
-                try:
-                    last = tuple(float(v) for v in line.split()[1:4])
-                except ValueError:
-                    raise ValueError(f'{path}:{lineno}: malformed ODOM line') from None
-                if len(last) != 3:
-                    raise ValueError(f'{path}:{lineno}: malformed ODOM line')
-                if reset is None:
-                    reset = last
-                continue
-            if not line.startswith('FLASER'):
-                continue
-            tok = line.split()
+    for lineno, line in _log_lines(path):
+        if line.startswith('ODOM'):
             try:
-                n = int(tok[1])
-                vals = np.asarray(tok[2:2 + n], dtype=float)
-                x, y, th = (float(v) for v in tok[2 + n:5 + n])
-                stamp = float(tok[8 + n])
-            except (IndexError, ValueError) as exc:
-                raise ValueError(f'{path}:{lineno}: malformed FLASER line ({exc})') from None
-            if len(vals) != n or (n_beams is not None and n != n_beams):
-                raise ValueError(f'{path}:{lineno}: expected {n_beams or n} readings, got {len(vals)}')
-            n_beams = n
-            if odo is None:
-                odo = last if last is not None else (0.0, 0.0, 0.0)
-            elif last is not None:
-                # increments count from the reset line (the corrected pose) when the log has
-                # one, else from the raw odometry at the previous scan
-                restarted = reset is not None and np.allclose(reset, prev_pose, atol=1e-6)
-                base = reset if restarted or prev_raw is None else prev_raw
-                odo = compose(odo, compose(inverse(base), last))
-            else:
-                have_odom = False
-            odometry.append(odo)
-            prev_raw, prev_pose = last, (x, y, th)
-            reset = None
-            rows.append(vals)
-            poses.append((x, y, th))
-            stamps.append(stamp)
+                last = tuple(float(v) for v in line.split()[1:4])
+            except ValueError:
+                raise ValueError(f'{path}:{lineno}: malformed ODOM line') from None
+            if len(last) != 3:
+                raise ValueError(f'{path}:{lineno}: malformed ODOM line')
+            if reset is None:
+                reset = last
+            continue
+        if not line.startswith('FLASER'):
+            continue
+        tok = line.split()
+        try:
+            n = int(tok[1])
+            vals = np.asarray(tok[2:2 + n], dtype=float)
+            x, y, th = (float(v) for v in tok[2 + n:5 + n])
+            stamp = float(tok[8 + n])
+        except (IndexError, ValueError) as exc:
+            raise ValueError(f'{path}:{lineno}: malformed FLASER line ({clip(exc)})') from None
+        if n < 1 or len(vals) != n or (n_beams is not None and n != n_beams):
+            raise ValueError(f'{path}:{lineno}: expected {n_beams or n} readings, got {len(vals)}')
+        n_beams = n
+        if odo is None:
+            odo = last if last is not None else (0.0, 0.0, 0.0)
+        elif last is not None:
+            # increments count from the reset line (the corrected pose) when the log has
+            # one, else from the raw odometry at the previous scan
+            restarted = reset is not None and np.allclose(reset, prev_pose, atol=1e-6)
+            base = reset if restarted or prev_raw is None else prev_raw
+            odo = compose(odo, compose(inverse(base), last))
+        else:
+            have_odom = False
+        odometry.append(odo)
+        prev_raw, prev_pose = last, (x, y, th)
+        reset = None
+        rows.append(vals)
+        poses.append((x, y, th))
+        stamps.append(stamp)
     if not rows:
         raise ValueError(f'{path}: no FLASER lines')
     ranges = np.vstack(rows)
@@ -153,13 +171,15 @@ def select_scans(count: int, which: str = 'all', every: int = 1, first: int | No
 
 def build_map(log: CarmenLog, indices: Sequence[int] | None = None,
               config: MapBuildConfig | None = None, beam_angles: np.ndarray | None = None,
-              progress: ProgressCallback | None = None) -> OccupancyMap:
-    """Occupancy map of ``log`` from the scans ``indices`` (default: the even ones)."""
+              progress: ProgressCallback | None = None,
+              max_cells: int = MAX_MAP_CELLS) -> OccupancyMap:
+    """Occupancy map of ``log`` from the scans ``indices`` (default: the even ones); a grid of
+    more than ``max_cells`` cells (0: no limit) is refused before it is allocated."""
     idx = select_scans(len(log), 'even') if indices is None else np.asarray(indices, dtype=int)
     if idx.size == 0:
         raise ValueError(f'{log.name}: no scans selected for the map')
     angles = log.beam_angles() if beam_angles is None else np.asarray(beam_angles, dtype=float)
-    return build_grid_map(log.ranges[idx], log.poses[idx], angles, config, progress)
+    return build_grid_map(log.ranges[idx], log.poses[idx], angles, config, progress, max_cells)
 
 
 def endpoint_fit(occ_map: OccupancyMap, log: CarmenLog, indices: Sequence[int],
@@ -242,29 +262,37 @@ def convert_carmen(log_path: str | Path, out_dir: str | Path, name: str | None =
                    last: int | None = None, config: MapBuildConfig | None = None,
                    with_odom: bool = True, write_queries: bool = True, overwrite: bool = False,
                    bag_path: str | Path | None = None,
-                   progress: ProgressCallback | None = None) -> ConversionResult:
+                   progress: ProgressCallback | None = None,
+                   max_map_cells: int = MAX_MAP_CELLS) -> ConversionResult:
     """CARMEN log -> ``OUT/NAME.yaml`` + ``.pgm`` (map of the ``map_scans`` scans) and the bag
     ``OUT/NAME_queries/`` (the ``query_scans`` scans, every ``every``-th, at most ``max_scans``).
     ``first``/``last`` restrict both to the scan index range ``[first, last)``; ``bag_path``
-    overrides the bag's location."""
+    overrides the bag's location. Every output path is checked before the map is built; a map
+    of more than ``max_map_cells`` cells (0: no limit) is refused."""
+    out_dir = check_output_dir(out_dir, 'output directory')
     log = read_carmen_log(log_path)
     name = name or log.name
-    out_dir = Path(out_dir)
     bag_path = Path(bag_path) if bag_path is not None else out_dir / f'{name}_queries'
-    if write_queries and bag_path.exists() and not overwrite:
-        raise FileExistsError(f'bag exists already (use --force): {bag_path}')
+    map_yaml = check_output_file(out_dir / f'{name}.yaml', 'map file')
+    check_output_file(map_yaml.with_suffix('.pgm'), 'map file')
+    if write_queries:
+        check_output_dir(bag_path, 'bag', overwrite)
     m_idx = select_scans(len(log), map_scans, 1, first, last)
     q_idx = select_scans(len(log), query_scans, every, first, last, max_scans)
     if m_idx.size == 0:
         raise ValueError(f'{log_path}: no scans selected for the map')
-    occ_map = build_map(log, m_idx, config, progress=progress)
-    map_yaml = out_dir / f'{name}.yaml'
-    save_map_yaml(occ_map, map_yaml)
+    if write_queries and q_idx.size == 0:
+        raise ValueError(f'{log_path}: no query scans selected')
+    occ_map = build_map(log, m_idx, config, progress=progress, max_cells=max_map_cells)
     bag = None
-    if write_queries:
-        if q_idx.size == 0:
-            raise ValueError(f'{log_path}: no query scans selected')
+    if write_queries:     # the bag, then the map; when the map fails the new bag goes too
         bag = write_log_bag(log, q_idx, bag_path, occ_map, with_odom, overwrite, progress)
+    try:
+        save_map_yaml(occ_map, map_yaml)
+    except BaseException:
+        if bag is not None:
+            shutil.rmtree(bag, ignore_errors=True)
+        raise
     return ConversionResult(map_yaml=map_yaml, bag=bag, map_scans=int(m_idx.size),
                             query_scans=int(q_idx.size) if write_queries else 0,
                             map_shape=occ_map.shape)

@@ -10,6 +10,11 @@ import numpy as np
 from ..config.mapping import MapBuildConfig
 from ..progress import ProgressCallback
 from .map_io import OccupancyMap
+from .map_limits import MAX_MAP_CELLS, check_map_cells
+
+#: most beam samples traversed in one vectorized batch (bounds the batch's memory whatever the
+#: resolution; at the defaults it is ``chunk_beams`` beams of 1600 samples)
+SAMPLES_PER_CHUNK = 32_000_000
 
 
 def _beam_segments(ranges, poses, beam_angles, cfg: MapBuildConfig):
@@ -26,13 +31,16 @@ def _beam_segments(ranges, poses, beam_angles, cfg: MapBuildConfig):
 
 def build_occupancy_grid(ranges: np.ndarray, poses: np.ndarray, beam_angles: np.ndarray,
                          config: MapBuildConfig | None = None,
-                         progress: ProgressCallback | None = None
+                         progress: ProgressCallback | None = None,
+                         max_cells: int = MAX_MAP_CELLS
                          ) -> tuple[np.ndarray, tuple[float, float, float]]:
     """Trinary occupancy grid (int8: 100 occupied, 0 free, -1 unknown) and its origin.
 
     ``ranges`` (S, n) with ``inf`` for no return, ``poses`` (S, 3) laser poses in the world
     frame, ``beam_angles`` (n,). Cells along each beam (sampled every half cell) count a miss,
     the end cell of a finite reading a hit. Rows grow with y, columns with x (OccupancyGrid).
+    A grid of more than ``max_cells`` cells (0: no limit) raises
+    :class:`~.map_limits.MapTooLargeError` before it is allocated.
     """
     cfg = config or MapBuildConfig()
     ranges = np.atleast_2d(np.asarray(ranges, dtype=float))
@@ -50,6 +58,7 @@ def build_occupancy_grid(ranges: np.ndarray, poses: np.ndarray, beam_angles: np.
               round(float(np.floor(lo[1] / res) * res), 9), 0.0)
     width = int(np.ceil((hi[0] - origin[0]) / res))
     height = int(np.ceil((hi[1] - origin[1]) / res))
+    check_map_cells(width, height, max_cells, f'grid at resolution {res:g} m')
     org = np.array(origin[:2])
     hits = np.zeros(height * width, dtype=np.int64)
     misses = np.zeros(height * width, dtype=np.int64)
@@ -72,8 +81,10 @@ def build_occupancy_grid(ranges: np.ndarray, poses: np.ndarray, beam_angles: np.
     for first_pass, ids in ((True, order[:n_hit]), (False, order[n_hit:])):
         if not first_pass:
             occupied = (hits >= cfg.min_hits) & (hits >= cfg.occupied_ratio * (hits + misses))
-        for a in range(0, len(ids), cfg.chunk_beams):
-            chunk = ids[a:a + cfg.chunk_beams]
+        longest = int(n_samples[ids].max()) if len(ids) else 1
+        per_chunk = max(1, min(cfg.chunk_beams, SAMPLES_PER_CHUNK // max(longest, 1)))
+        for a in range(0, len(ids), per_chunk):
+            chunk = ids[a:a + per_chunk]
             counts = n_samples[chunk]
             beam = np.repeat(chunk, counts)
             done += len(chunk)
@@ -113,8 +124,9 @@ def _crop_known(data: np.ndarray, origin, res: float, margin: float):
 
 def build_grid_map(ranges: np.ndarray, poses: np.ndarray, beam_angles: np.ndarray,
                    config: MapBuildConfig | None = None,
-                   progress: ProgressCallback | None = None) -> OccupancyMap:
+                   progress: ProgressCallback | None = None,
+                   max_cells: int = MAX_MAP_CELLS) -> OccupancyMap:
     """:func:`build_occupancy_grid` as an :class:`OccupancyMap` (frame ``map``)."""
     cfg = config or MapBuildConfig()
-    data, origin = build_occupancy_grid(ranges, poses, beam_angles, cfg, progress)
+    data, origin = build_occupancy_grid(ranges, poses, beam_angles, cfg, progress, max_cells)
     return OccupancyMap(data=data, resolution=float(cfg.resolution), origin=origin)

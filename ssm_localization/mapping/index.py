@@ -9,8 +9,8 @@ the sensor pose on the robot) and precomputes the matcher's per-scan features
 from __future__ import annotations
 
 import dataclasses
-import os
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,10 +18,13 @@ import numpy as np
 
 from ..config.mapping import IndexConfig
 from ..config.params import config_from_json, config_to_json
+from ..files.reading import clip, input_file
+from ..files.writing import atomic_files
 from ..matching.features import ScanFeatures, prepare_scan
 from ..progress import ProgressCallback
 from ..transforms import compose
 from .map_io import OccupancyMap
+from .map_limits import MAX_MAP_CELLS, MapTooLargeError, check_map_cells
 from .raycast import RayCaster
 from .raycast import beam_angles as _beam_angles
 from .topology import build_topology, count_kinds
@@ -147,28 +150,50 @@ def save_index(index: MapIndex, path: str | Path) -> Path:
     for key, a in arrays.items():
         if a.dtype == object:
             raise ValueError(f'save_index: {key} would need pickling')
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + '.tmp')
-    with open(tmp, 'wb') as fh:
-        np.savez_compressed(fh, **arrays)
-    os.replace(tmp, path)
+    with atomic_files(path, what='index file') as (tmp,):
+        with open(tmp, 'wb') as fh:
+            np.savez_compressed(fh, **arrays)
     return path
 
 
-def load_index(path: str | Path, expected_map: OccupancyMap | None = None) -> MapIndex:
+def declared_arrays(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """``{name: (shape, dtype)}`` of the arrays of an ``.npz`` file from their ``.npy`` headers,
+    without decompressing their data (a small file may declare gigabytes)."""
+    out = {}
+    with zipfile.ZipFile(path) as zf:
+        for member in zf.namelist():
+            with zf.open(member) as fh:
+                version = np.lib.format.read_magic(fh)
+                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                               else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = read_header(fh)
+            out[member.removesuffix('.npy')] = (tuple(shape), dtype)
+    return out
+
+
+def load_index(path: str | Path, expected_map: OccupancyMap | None = None,
+               max_cells: int = MAX_MAP_CELLS) -> MapIndex:
     """Read an index written by :func:`save_index` (never unpickles).
 
-    Raises ``ValueError`` for a file of another format version, a corrupt file, or (with
-    ``expected_map``) an index built for another map; ``FileNotFoundError`` if it is missing.
+    Raises ``ValueError`` for a file of another format version, a corrupt file, a map of more
+    than ``max_cells`` cells (0: no limit; checked from the array headers before anything is
+    decompressed), or (with ``expected_map``) an index built for another map;
+    ``FileNotFoundError`` if it is missing.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f'index file not found: {path}')
+    path = input_file(path, 'index file')
     try:
+        declared = declared_arrays(path)
+        for name in ('map_data', 'gvd_mask'):
+            shape = declared.get(name, ((0, 0), None))[0]
+            if len(shape) != 2:
+                raise ValueError(f'{name} has shape {shape}, expected (H, W)')
+            check_map_cells(shape[1], shape[0], max_cells, f'{path}: {name}')
         with np.load(path, allow_pickle=False) as z:
             data = {key: z[key] for key in z.files}
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
-        raise ValueError(f'{path}: not a readable index file ({exc})') from None
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
+        if isinstance(exc, MapTooLargeError):
+            raise
+        raise ValueError(f'{path}: not a readable index file ({clip(exc)})') from None
     if 'format_version' not in data:
         raise ValueError(f'{path}: not an ssm_localization index (no format_version)')
     version = int(data['format_version'])

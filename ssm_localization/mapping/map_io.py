@@ -13,12 +13,24 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
-from PIL import Image, UnidentifiedImageError
+from PIL import Image
 
+from ..files.reading import echo, input_file
+from ..files.writing import atomic_files
+from ..files.yaml_input import load_yaml_file
 from ..transforms import apply, quaternion_to_yaw
+from .map_image import read_shade
+from .map_limits import MAX_MAP_CELLS, check_map_cells
 
 MODES = ('trinary', 'scale', 'raw')
+
+
+#: largest magnitude of the resolution and origin: nav_msgs/OccupancyGrid carries them as float32
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _fits_float32(v: float) -> bool:
+    return math.isfinite(v) and abs(v) <= FLOAT32_MAX
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,12 +52,13 @@ class OccupancyMap:
         if data.size and (data.min() < -1 or data.max() > 100):
             raise ValueError('OccupancyMap.data: values must be -1 (unknown) or 0..100')
         res = float(self.resolution)
-        if not (math.isfinite(res) and res > 0.0):
-            raise ValueError(f'OccupancyMap.resolution: expected a positive number, got {res}')
+        if not (_fits_float32(res) and res > 0.0):
+            raise ValueError(f'OccupancyMap.resolution: expected a positive number within '
+                             f'float32 range, got {res}')
         origin = tuple(float(v) for v in self.origin)
-        if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
-            raise ValueError(f'OccupancyMap.origin: expected finite (x, y, yaw), '
-                             f'got {self.origin}')
+        if len(origin) != 3 or not all(map(_fits_float32, origin)):
+            raise ValueError(f'OccupancyMap.origin: expected finite (x, y, yaw) within float32 '
+                             f'range, got {echo(self.origin)}')
         object.__setattr__(self, 'data', np.ascontiguousarray(data, dtype=np.int8))
         object.__setattr__(self, 'resolution', res)
         object.__setattr__(self, 'origin', origin)
@@ -139,44 +152,23 @@ def _field(doc: dict, name: str, path: Path, kind, required: bool = True, defaul
         pass
     want = {float: 'a number', bool: '0/1 or true/false', str: 'a non-empty string',
             'origin': 'a list [x, y, yaw] of 3 numbers'}[kind]
-    raise ValueError(f'{path}: field {name!r} must be {want}, got {value!r}')
+    raise ValueError(f'{path}: field {name!r} must be {want}, got {echo(value)}')
 
 
-def _image_shade(path: Path) -> np.ndarray:
-    """Brightness in [0, 1] per pixel (mean of the colour channels; alpha ignored)."""
-    try:
-        with Image.open(path) as img:
-            img.load()
-            mode = img.mode
-            if mode in ('I;16', 'I;16B', 'I;16L', 'I'):
-                a = np.asarray(img, dtype=np.float64)
-                return a / (65535.0 if mode.startswith('I;16') else max(float(a.max()), 1.0))
-            if mode == 'F':
-                return np.clip(np.asarray(img, dtype=np.float64), 0.0, 1.0)
-            if mode not in ('L', 'RGB'):
-                img = img.convert('RGBA' if 'A' in mode or mode == 'P' else 'RGB')
-            a = np.asarray(img, dtype=np.float64)
-    except UnidentifiedImageError:
-        raise ValueError(f'{path}: not a readable image') from None
-    if a.ndim == 3:
-        a = a[..., :3].mean(axis=2)
-    return a / 255.0
-
-
-def load_map_yaml(path: str | Path) -> OccupancyMap:
+def load_map_yaml(path: str | Path, max_cells: int = MAX_MAP_CELLS) -> OccupancyMap:
     """Load a nav2 map_server map (YAML + PGM/PNG), following map_server's ``loadMapFromFile``.
 
     ``p = 1 - shade`` (``shade`` if ``negate``); trinary: ``p > occupied_thresh`` -> 100,
     ``p < free_thresh`` -> 0, else -1; scale: the same with a linear 0..100 between the
     thresholds; raw: the pixel value (``-1`` outside 0..100). Alpha is ignored.
+
+    Bounded: the YAML is read with :func:`~ssm_localization.files.yaml_input.load_yaml_file`
+    (size and alias limits) and an image of more than ``max_cells`` pixels (0: no limit) is
+    refused from its header, before decoding. Bad input raises ``ValueError`` (missing files
+    ``FileNotFoundError``) naming the file and field.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f'map YAML not found: {path}')
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ValueError(f'{path}: malformed YAML: {exc}') from None
+    path = input_file(path, 'map YAML')
+    doc = load_yaml_file(path, 'map YAML')
     if not isinstance(doc, dict):
         raise ValueError(f'{path}: expected a mapping with image, resolution, origin, ...')
     image = _field(doc, 'image', path, str)
@@ -184,6 +176,9 @@ def load_map_yaml(path: str | Path) -> OccupancyMap:
     if resolution <= 0.0:
         raise ValueError(f'{path}: field \'resolution\' must be > 0, got {resolution}')
     origin = _field(doc, 'origin', path, 'origin')
+    if not all(map(_fits_float32, (resolution, *origin))):
+        raise ValueError(f'{path}: fields \'resolution\' and \'origin\' must be within float32 '
+                         f'range (|v| <= {FLOAT32_MAX:.3g}), as map messages carry them')
     negate = _field(doc, 'negate', path, bool, required=False, default=False)
     occ_t = _field(doc, 'occupied_thresh', path, float, required=False, default=0.65)
     free_t = _field(doc, 'free_thresh', path, float, required=False, default=0.25)
@@ -196,13 +191,15 @@ def load_map_yaml(path: str | Path) -> OccupancyMap:
                          f'({occ_t})')
     mode = doc.get('mode', 'trinary')
     if mode not in MODES:
-        raise ValueError(f'{path}: field \'mode\' must be one of {MODES}, got {mode!r}')
+        raise ValueError(f'{path}: field \'mode\' must be one of {MODES}, got {echo(mode)}')
     img_path = Path(image)
     if not img_path.is_absolute():
         img_path = path.parent / img_path
-    if not img_path.is_file():
-        raise FileNotFoundError(f'{path}: image file not found: {img_path}')
-    shade = _image_shade(img_path)
+    try:
+        input_file(img_path, 'map image')
+    except (FileNotFoundError, ValueError) as exc:
+        raise type(exc)(f'{path}: {exc}') from None
+    shade = read_shade(img_path, max_cells)
     data = _shade_to_occupancy(shade, mode, negate, occ_t, free_t)
     return OccupancyMap(np.flipud(data), resolution, origin, 'map')
 
@@ -226,27 +223,32 @@ def save_map_yaml(occ_map: OccupancyMap, yaml_path: str | Path) -> Path:
     """Write ``yaml_path`` and a trinary PGM beside it (same stem); returns the PGM path.
 
     Occupied (``>= 65``) -> 0, free (``0..25``) -> 254, anything else -> 205 (unknown), with
-    ``occupied_thresh: 0.65``, ``free_thresh: 0.196`` as map_saver writes them.
+    ``occupied_thresh: 0.65``, ``free_thresh: 0.196`` as map_saver writes them. Both files are
+    written or neither (:func:`~ssm_localization.files.writing.atomic_files`).
     """
     yaml_path = Path(yaml_path)
     pgm = yaml_path.with_suffix('.pgm')
     img = np.full(occ_map.shape, 205, dtype=np.uint8)
     img[occ_map.free_mask()] = 254
     img[occ_map.occupied_mask()] = 0
-    yaml_path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(np.flipud(img), mode='L').save(pgm)
     x, y, yaw = occ_map.origin
-    yaml_path.write_text(
-        f'image: {pgm.name}\nmode: trinary\nresolution: {occ_map.resolution!r}\n'
-        f'origin: [{x!r}, {y!r}, {yaw!r}]\nnegate: 0\noccupied_thresh: 0.65\n'
-        f'free_thresh: 0.196\n')
+    with atomic_files(pgm, yaml_path, what='map file') as (tmp_pgm, tmp_yaml):
+        Image.fromarray(np.flipud(img), mode='L').save(tmp_pgm, format='PPM')
+        tmp_yaml.write_text(
+            f'image: {pgm.name}\nmode: trinary\nresolution: {occ_map.resolution!r}\n'
+            f'origin: [{x!r}, {y!r}, {yaw!r}]\nnegate: 0\noccupied_thresh: 0.65\n'
+            f'free_thresh: 0.196\n')
     return pgm
 
 
 # --------------------------------------------------------------------------- messages
 
-def occupancy_map_from_msg(msg) -> OccupancyMap:
-    """An :class:`OccupancyMap` from a nav_msgs/OccupancyGrid (rclpy or rosbags message)."""
+def occupancy_map_from_msg(msg, max_cells: int = 0) -> OccupancyMap:
+    """An :class:`OccupancyMap` from a nav_msgs/OccupancyGrid (rclpy or rosbags message).
+
+    A map of more than ``max_cells`` cells (0, the default: no limit) raises
+    :class:`~.map_limits.MapTooLargeError` before its data is converted.
+    """
     try:
         info = msg.info
         width, height = int(info.width), int(info.height)
@@ -257,12 +259,13 @@ def occupancy_map_from_msg(msg) -> OccupancyMap:
         raw = msg.data
     except AttributeError as exc:
         raise ValueError(f'OccupancyGrid message: missing field ({exc})') from None
+    if width <= 0 or height <= 0:
+        raise ValueError(f'OccupancyGrid message: empty map ({width} x {height})')
+    check_map_cells(width, height, max_cells, 'OccupancyGrid message')
     data = np.asarray(raw)
     if data.dtype.kind not in 'iu':
         data = np.asarray(raw, dtype=np.int64)
     data = data.astype(np.int16).reshape(-1)
-    if width <= 0 or height <= 0:
-        raise ValueError(f'OccupancyGrid message: empty map ({width} x {height})')
     if data.size != width * height:
         raise ValueError(f'OccupancyGrid message: len(data) = {data.size} != width * height = '
                          f'{width} * {height}')

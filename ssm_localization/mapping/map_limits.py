@@ -1,0 +1,25 @@
+"""The map-size guard shared by the command line, the library and the ROS nodes.
+
+A grid of ``width x height`` cells costs several bytes per cell to index (distance transforms,
+the GVD, float images while decoding), so oversized maps are refused by their declared size,
+before any memory is spent on them.
+"""
+from __future__ import annotations
+
+#: default limit: 25 M cells (a 250 m x 250 m building at 5 cm); 0 disables the guard
+MAX_MAP_CELLS = 25_000_000
+
+
+class MapTooLargeError(ValueError):
+    """A map whose cell count exceeds the configured ``max_map_cells``."""
+
+
+def check_map_cells(width: int, height: int, max_cells: int, where: str = 'map') -> None:
+    """Raise :class:`MapTooLargeError` when ``width * height > max_cells`` (``max_cells`` 0:
+    no limit); ``ValueError`` for a negative limit. The message names ``where``."""
+    if max_cells < 0:
+        raise ValueError(f'max_map_cells must be >= 0 (0 = no limit), got {max_cells}')
+    cells = int(width) * int(height)
+    if max_cells and cells > max_cells:
+        raise MapTooLargeError(f'{where}: map of {int(width)} x {int(height)} cells exceeds '
+                               f'max_map_cells = {max_cells} (0 = no limit)')
