@@ -181,6 +181,15 @@ class GlobalLocalizer:
         self._node_trees = ([cKDTree(f.points) if len(f.points) else None
                              for f in index.features] if cfg.paper_mode else [])
 
+    # -- frames -------------------------------------------------------------------------------
+    def base_pose(self, laser_pose: Pose2) -> Pose2:
+        """The base pose in the map frame given the laser's."""
+        return compose(laser_pose, self._base_from_laser)
+
+    def laser_pose(self, base_pose: Pose2) -> Pose2:
+        """The laser pose in the map frame given the base's."""
+        return compose(base_pose, self.config.laser_pose)
+
     # -- entry points -----------------------------------------------------------------------
     def localize_scan(self, ranges, angle_min: float, angle_increment: float,
                       range_min: float = 0.0, range_max: float = float('inf')) -> Localization:
@@ -369,7 +378,7 @@ class GlobalLocalizer:
         for h, r in zip(todo, results):
             h.laser_pose, h.explained, h.depth, h.refined = r.pose, r.explained, r.depth, True
             h.score = h.explained
-            h.pose = compose(h.laser_pose, self._base_from_laser)
+            h.pose = self.base_pose(h.laser_pose)
             h.covariance = self.report_covariance(r.covariance, h.laser_pose)
         out: list[Hypothesis] = []
         for h in sorted(todo, key=lambda h: -h.explained):
@@ -401,7 +410,7 @@ class GlobalLocalizer:
                          estimate_depth=cfg.estimate_depth, depth_prior=cfg.surface_depth_std,
                          score_sigma=cfg.score_sigma)[0]
         h.laser_pose, h.depth = r.pose, r.depth
-        h.pose = compose(h.laser_pose, self._base_from_laser)
+        h.pose = self.base_pose(h.laser_pose)
         h.covariance = self.report_covariance(r.covariance, h.laser_pose)
 
     def decide(self, query: Query, hyps: list[Hypothesis], clock: _Clock) -> Localization:
