@@ -54,7 +54,10 @@ class LocalizerConfig:
                                       'endpoint of the scan (0: none)')
     estimate_depth: bool = param(True, 'estimate the wall-surface offset from the scan itself')
     # -- verification and the answer
-    verify_hypotheses: int = param(3, 'best refined hypotheses checked by ray casting')
+    verify_hypotheses: int = param(3, 'refined hypotheses checked by ray casting, at least (best '
+                                      'explained first)')
+    verify_margin: float = param(0.1, '... and every one whose explained fraction is within this '
+                                      'of the best')
     verify_beams: int = param(120, 'beams (evenly chosen) ray-cast per verified hypothesis')
     max_cast_range: float = param(30.0, 'ray-cast range of the beam check and points used by '
                                         'the correlative search, metres')
@@ -64,6 +67,8 @@ class LocalizerConfig:
                                      'mean(exp(-r^2 / 2 sigma^2)), metres')
     contradiction_weight: float = param(1.0, 'score = explained fraction - this x fraction of '
                                              'beams seeing through walls')
+    max_contradicting: float = param(0.35, 'a pose with more of its beams seeing through walls '
+                                           'is implausible; with no plausible pose: failed')
     min_score: float = param(0.4, 'a best pose scoring less (explained fraction minus the '
                                   'through-wall penalty): failed')
     ambiguity_margin: float = param(0.02, 'a distinct rival scoring within this of the best: '
@@ -100,7 +105,7 @@ class LocalizerConfig:
                 raise ValueError(f'LocalizerConfig.{name} must be a finite number > 0, '
                                  f'got {value!r}')
         for name in ('search_spread', 'search_alignments', 'refine_iterations', 'polish_iterations', 'surface_depth', 'search_min_score',
-                     'contradiction_weight', 'min_score', 'ambiguity_margin',
+                     'contradiction_weight', 'max_contradicting', 'min_score', 'verify_margin', 'ambiguity_margin',
                      'min_position_std', 'min_yaw_std', 'min_points'):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):

@@ -207,6 +207,11 @@ class CorrelativeGrid:
         lv = lv[lv[:, 3] >= max(min_score, ratio * best)]
         lv = lv[np.argsort(-lv[:, 3], kind='stable')][:max_leaves]
         poses = self.poses_of(lv[:, 0].astype(int), lv[:, 1], lv[:, 2], thetas)
+        if window is not None:      # the searched cells cover the box; keep what lies in it
+            x0, y0, x1, y1 = window
+            inside = ((poses[:, 0] >= x0) & (poses[:, 0] <= x1) & (poses[:, 1] >= y0)
+                      & (poses[:, 1] <= y1))
+            poses, lv = poses[inside], lv[inside]
         return CorrelativeResult(poses=poses, scores=lv[:, 3], evaluated=evaluated,
                                  complete=complete, elapsed_ms=(time.perf_counter() - t0) * 1e3)
 

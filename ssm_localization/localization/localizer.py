@@ -166,14 +166,13 @@ class GlobalLocalizer:
             raise ValueError('the map index has no nodes: nothing to localize against')
         m = index.map
         occupied = m.occupied_mask(index.config.occupied_thresh)
-        self.voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw)
         self.grid = CorrelativeGrid(m, occupied_thresh=index.config.occupied_thresh,
                                     sigma=cfg.search_sigma, depth=cfg.search_depth,
                                     max_range=cfg.max_cast_range)
         self.surface = SurfaceModel.from_occupancy(occupied, m.resolution, m.origin,
                                                    cfg.surface_depth)
-        _ = self.surface.lattice     # built now, not during the first scan
         self.caster = RayCaster(occupied, m.resolution, m.origin)
+        self.voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw)
         self._map_directions = self.voting.orientation_histogram()
         self._base_from_laser = inverse(cfg.laser_pose)
         self._paper_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
@@ -244,11 +243,13 @@ class GlobalLocalizer:
         if not hyps:
             return self._failed(clock, 'no pose hypothesis: neither the pose votes nor the '
                                        'correlative search found a place that fits')
-        hyps = self.refine(query, self._best_by_correlation(query, hyps))
+        ranked = self._best_by_correlation(query, hyps)
+        refined = self.refine(query, ranked)
         clock.lap('refine')
-        self.verify(query, hyps[:self.config.verify_hypotheses])
+        self.verify(query, self._worth_verifying(refined))
         clock.lap('verify')
-        return self.decide(query, hyps, clock)
+        return self.decide(query, refined, clock,
+                           others=[h for h in ranked if not h.refined])
 
     # -- stages -----------------------------------------------------------------------------
     def spectral_hypotheses(self, query: Query, clock: _Clock | None = None) -> list[Hypothesis]:
@@ -386,6 +387,17 @@ class GlobalLocalizer:
                 out.append(h)
         return out
 
+    def _worth_verifying(self, refined: list[Hypothesis]) -> list[Hypothesis]:
+        """The refined hypotheses (best explained first) within ``verify_margin`` of the best
+        explained fraction, at least ``verify_hypotheses`` of them: any of these could win or be a
+        rival once the beams that see through walls are counted."""
+        cfg = self.config
+        if not refined:
+            return []
+        top = refined[0].explained
+        return [h for k, h in enumerate(refined)
+                if k < cfg.verify_hypotheses or h.explained >= top - cfg.verify_margin]
+
     def verify(self, query: Query, hyps: list[Hypothesis]) -> None:
         """Ray-cast the query's beams from every hypothesis at once; compare with the scan."""
         if not hyps:
@@ -413,40 +425,28 @@ class GlobalLocalizer:
         h.pose = self.base_pose(h.laser_pose)
         h.covariance = self.report_covariance(r.covariance, h.laser_pose)
 
-    def decide(self, query: Query, hyps: list[Hypothesis], clock: _Clock) -> Localization:
-        """Status, pose and covariance from refined and verified hypotheses (best score first)."""
-        cfg = self.config
-        checked = sorted((h for h in hyps if h.check is not None), key=lambda h: -h.score)
+    def decide(self, query: Query, hyps: list[Hypothesis], clock: _Clock | None = None,
+               others: list[Hypothesis] = ()) -> Localization:
+        """The answer from refined and verified hypotheses: the best scoring one, polished on
+        every endpoint, with the status of :func:`verdict`.
+
+        ``candidates`` of the answer: the verified hypotheses by score, then the refined ones,
+        then ``others`` (not refined), for diagnosis (``bench localize`` reads them).
+        """
+        clock = clock or _Clock()
+        limit = self.config.max_contradicting
+        checked = sorted((h for h in hyps if h.check is not None),
+                         key=lambda h: (h.contradicting > limit, -h.score))
+        if not checked:
+            return self._failed(clock, 'no verified hypothesis')
         best = checked[0]
         self.polish(query, best)
-        common = dict(pose=best.pose, node=best.node, score=best.score, candidates=checked,
-                      stages=clock.stages)
-        if best.score < cfg.min_score:
-            return Localization(status='failed', covariance=_inflated(best.covariance),
-                                latency_ms=clock.total_ms, message=(
-                                    f'the best pose explains too little of the scan (explained '
-                                    f'{best.explained:.0%}, through walls '
-                                    f'{best.contradicting:.0%}: score {best.score:.2f} < '
-                                    f'{cfg.min_score})'), **common)
-        rivals = [h for h in checked[1:]
-                  if distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)
-                  and h.score >= best.score - cfg.ambiguity_margin]
-        cov = best.covariance
-        std = position_std(cov)
-        if rivals:
-            spread = np.array([h.pose for h in rivals + [best]])
-            cov = cov + np.diag([*np.var(spread[:, :2], axis=0), np.pi ** 2 / 3.0])
-            return Localization(status='ambiguous', covariance=cov, latency_ms=clock.total_ms,
-                                message=(f'{len(rivals) + 1} distinct poses fit about equally '
-                                         f'well (scores {best.score:.2f} and '
-                                         f'{max(h.score for h in rivals):.2f})'), **common)
-        if std > cfg.max_position_std:
-            return Localization(status='ambiguous', covariance=cov, latency_ms=clock.total_ms,
-                                message=(f'degenerate geometry (e.g. a corridor): position std '
-                                         f'{std:.2f} m along the weakest direction'), **common)
-        return Localization(status='ok', covariance=cov, latency_ms=clock.total_ms, message=(
-            f'explained {best.explained:.0%}, through walls {best.contradicting:.0%}, '
-            f'position std {std * 1e3:.0f} mm'), **common)
+        status, message, cov = verdict(checked, self.config)
+        return Localization(status=status, pose=best.pose, covariance=cov, node=best.node,
+                            score=best.score, message=message, latency_ms=clock.total_ms,
+                            stages=clock.stages,
+                            candidates=checked + [h for h in hyps if h.check is None]
+                            + list(others))
 
     def report_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
         """The Gauss-Newton laser covariance, scaled and floored, propagated to the base."""
@@ -505,6 +505,43 @@ def _evenly(points: np.ndarray, count: int) -> np.ndarray:
     return points[np.linspace(0, len(points) - 1, count).astype(int)]
 
 
+def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig) -> tuple[str, str, np.ndarray]:
+    """``(status, message, covariance)`` for verified hypotheses, plausible ones first, then by
+    score.
+
+    ``failed`` when even the best has more than ``max_contradicting`` of its beams seeing through
+    walls, or explains too little of the scan (score below ``min_score``);
+    ``ambiguous`` when a distinct pose scores within ``ambiguity_margin`` of it (the covariance
+    then spans them) or when its position is undetermined beyond ``max_position_std`` along some
+    direction (2 sigma beyond the 0.5 m success tolerance: a bare corridor); else ``ok``.
+    """
+    best = ranked[0]
+    cov = best.covariance if best.covariance is not None else np.diag([1e3, 1e3, 1e3])
+    if best.contradicting > cfg.max_contradicting:
+        return 'failed', (f'no pose agrees with the map: at the best, {best.contradicting:.0%} of '
+                          f'the beams see through walls (> {cfg.max_contradicting:.0%})'), \
+            _inflated(cov)
+    if best.score < cfg.min_score:
+        return 'failed', (f'the best pose explains too little of the scan (explained '
+                          f'{best.explained:.0%}, through walls {best.contradicting:.0%}: '
+                          f'score {best.score:.2f} < {cfg.min_score})'), _inflated(cov)
+    rivals = [h for h in ranked[1:]
+              if distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)
+              and h.score >= best.score - cfg.ambiguity_margin]
+    if rivals:
+        spread = np.array([h.pose for h in rivals + [best]])
+        cov = cov + np.diag([*np.var(spread[:, :2], axis=0), np.pi ** 2 / 3.0])
+        return 'ambiguous', (f'{len(rivals) + 1} distinct poses fit about equally well '
+                             f'(scores {best.score:.2f} and '
+                             f'{max(h.score for h in rivals):.2f})'), cov
+    std = position_std(cov)
+    if std > cfg.max_position_std:
+        return 'ambiguous', (f'degenerate geometry (e.g. a corridor): position std {std:.2f} m '
+                             f'along the weakest direction'), cov
+    return 'ok', (f'explained {best.explained:.0%}, through walls {best.contradicting:.0%}, '
+                  f'position std {std * 1e3:.0f} mm'), cov
+
+
 def position_std(cov: np.ndarray | None) -> float:
     """Standard deviation (m) of the position along its least constrained direction."""
     if cov is None:
@@ -512,5 +549,6 @@ def position_std(cov: np.ndarray | None) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(cov)[:2, :2]).max(), 0.0)))
 
 
-def _inflated(cov: np.ndarray | None) -> np.ndarray:
-    return np.diag([1e3, 1e3, 1e3]) if cov is None else cov + np.diag([1e2, 1e2, np.pi ** 2])
+def _inflated(cov: np.ndarray) -> np.ndarray:
+    """The covariance of a rejected pose: it says nothing about where the robot is."""
+    return cov + np.diag([1e2, 1e2, np.pi ** 2])

@@ -16,7 +16,6 @@ cost about half a cell of accuracy.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 from scipy import ndimage
@@ -24,25 +23,24 @@ from scipy import ndimage
 from ..transforms import Pose2, rotation, wrap_angle
 
 
-SUB = 2
-LATTICE = 1
-_NEIGHBOURHOOD = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
+#: lattice points per cell side of the precomputed signed distance
+SUBDIVISION = 2
 
 
 @dataclass(frozen=True, eq=False)
 class SurfaceModel:
-    """Exact signed distance to the boundary of occupied cells, shifted by ``depth`` metres.
+    """Signed distance to the boundary of occupied cells, shifted by ``depth`` metres.
 
-    For every cell the nearest occupied cell (for free cells) or nearest non-occupied cell (for
-    occupied cells) is precomputed once per map (EDT indices); a query then costs one table look-up
-    and a point-to-box distance per point, with an exact gradient.
+    The exact distance is precomputed on a lattice of half-cell spacing (``lattice``, float32, in
+    cells): the closest point of a union of lattice-aligned boxes to a lattice point is itself a
+    lattice point, so two Euclidean distance transforms give it exactly. Between lattice points it
+    is interpolated bilinearly (exact along straight axis-aligned walls, within a few hundredths of
+    a cell near corners), which makes a query four table look-ups per point.
     """
 
     origin: Pose2
     resolution: float
-    occupied: np.ndarray        # (H, W) bool
-    nearest_occ: np.ndarray     # (2, H, W) int32 row/col of the nearest occupied cell
-    nearest_free: np.ndarray    # (2, H, W) int32 row/col of the nearest non-occupied cell
+    lattice: np.ndarray         # (2H + 1, 2W + 1) float32 signed distance in cells
     depth: float                # metres behind the occupied-cell boundary where the surface lies
 
     @classmethod
@@ -51,41 +49,28 @@ class SurfaceModel:
         occupied = np.asarray(occupied, dtype=bool)
         if not occupied.any():
             raise ValueError('map has no occupied cells: nothing to refine against')
-        _, i_occ = ndimage.distance_transform_edt(~occupied, return_indices=True)
-        if occupied.all():
-            i_free = np.zeros_like(i_occ)
-        else:
-            _, i_free = ndimage.distance_transform_edt(occupied, return_indices=True)
+        fine = np.repeat(np.repeat(occupied, SUBDIVISION, axis=0), SUBDIVISION, axis=1)
+        # a lattice point touches the occupied (free) region when one of its 4 sub-cells does
+        occ_v = _touches(fine)
+        free_v = _touches(~fine)
+        outside = ndimage.distance_transform_edt(~occ_v)
+        inside = (ndimage.distance_transform_edt(~free_v) if free_v.any()
+                  else np.full(occ_v.shape, float(max(occ_v.shape))))
+        sdf = np.where(occ_v & free_v, 0.0, np.where(occ_v, -inside, outside)) / SUBDIVISION
         return cls(origin=tuple(float(v) for v in origin), resolution=float(resolution),
-                   occupied=occupied, nearest_occ=i_occ.astype(np.int32),
-                   nearest_free=i_free.astype(np.int32),
+                   lattice=sdf.astype(np.float32),
                    depth=float(surface_depth_cells) * float(resolution))
 
-    @cached_property
-    def lattice(self) -> np.ndarray:
-        """Exact signed distance (in lattice steps) at the points of a lattice of ``1/SUB`` cell
-        spacing: the closest point of a union of lattice-aligned boxes to a lattice point is a
-        lattice point, so two EDTs give it exactly."""
-        sub = SUB
-        occ = np.repeat(np.repeat(self.occupied, sub, axis=0), sub, axis=1)
-        pad = np.pad(occ, 1, constant_values=False)
-        occ_v = pad[:-1, :-1] | pad[:-1, 1:] | pad[1:, :-1] | pad[1:, 1:]
-        padf = np.pad(~occ, 1, constant_values=False)
-        free_v = padf[:-1, :-1] | padf[:-1, 1:] | padf[1:, :-1] | padf[1:, 1:]
-        out = ndimage.distance_transform_edt(~occ_v) if occ_v.any() else np.full(occ_v.shape, 1e6)
-        inn = ndimage.distance_transform_edt(~free_v) if free_v.any() else np.full(occ_v.shape, 1e6)
-        sdf = np.where(occ_v & free_v, 0.0, np.where(occ_v, -inn, out))
-        return (sdf / sub).astype(np.float32)
-
     def signed_distance(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Bilinear interpolation of the lattice signed distance (see ``_lattice``)."""
-        if not LATTICE:
-            return self.exact_signed_distance(pts)
+        """Signed distance (m) of map-frame points to the wall surface, its gradient, validity.
+
+        Positive in free space, negative inside walls; points off the grid are invalid.
+        """
         ox, oy, oyaw = self.origin
         rot = rotation(oyaw)
-        g = (np.asarray(pts, float) - (ox, oy)) @ rot / self.resolution * SUB
-        lat = self.lattice
-        h, w = lat.shape
+        g = (np.asarray(pts, float).reshape(-1, 2) - (ox, oy)) @ rot * (SUBDIVISION
+                                                                         / self.resolution)
+        h, w = self.lattice.shape
         j0 = np.floor(g[:, 0]).astype(np.int64)
         i0 = np.floor(g[:, 1]).astype(np.int64)
         valid = (j0 >= 0) & (j0 < w - 1) & (i0 >= 0) & (i0 < h - 1)
@@ -94,56 +79,23 @@ class SurfaceModel:
         if not valid.any():
             return s, grad, valid
         i, j = i0[valid], j0[valid]
-        fx = g[valid, 0] - j
-        fy = g[valid, 1] - i
-        flat = lat.ravel()
+        fx, fy = g[valid, 0] - j, g[valid, 1] - i
+        flat = self.lattice.ravel()
         k = i * w + j
         a, b, c, d = flat[k], flat[k + 1], flat[k + w], flat[k + w + 1]
-        top = a + fx * (b - a)
-        bot = c + fx * (d - c)
-        s[valid] = (top + fy * (bot - top)) * self.resolution + self.depth
-        gx = (b - a) + fy * ((d - c) - (b - a))
-        gy = bot - top
-        grad[valid] = np.column_stack((gx, gy)) * SUB @ rot.T
+        bottom = a + fx * (b - a)
+        top = c + fx * (d - c)
+        s[valid] = (bottom + fy * (top - bottom)) * self.resolution + self.depth
+        dcol = (b - a) + fy * ((d - c) - (b - a))
+        drow = top - bottom
+        grad[valid] = np.column_stack((dcol, drow)) * SUBDIVISION @ rot.T
         return s, grad, valid
 
-    def exact_signed_distance(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Signed distance (m) of map-frame points to the wall surface, its gradient, validity.
 
-        Positive in free space, negative inside walls; points off the grid are invalid.
-        """
-        ox, oy, oyaw = self.origin
-        rot = rotation(oyaw)
-        g = (np.asarray(pts, float) - (ox, oy)) @ rot / self.resolution  # grid units, (col, row)
-        h, w = self.occupied.shape
-        col = np.floor(g[:, 0]).astype(np.int64)
-        row = np.floor(g[:, 1]).astype(np.int64)
-        valid = (col >= 0) & (col < w) & (row >= 0) & (row < h)
-        s = np.zeros(len(g))
-        grad = np.zeros((len(g), 2))
-        if not valid.any():
-            return s, grad, valid
-        r, c, gv = row[valid], col[valid], g[valid]
-        inside = self.occupied[r, c]
-        # The nearest box is the nearest-centre cell of this cell or of one of its 8 neighbours.
-        best = np.full(len(gv), np.inf)
-        diff = np.zeros_like(gv)
-        for dr, dc in _NEIGHBOURHOOD:
-            rr, cc = np.clip(r + dr, 0, h - 1), np.clip(c + dc, 0, w - 1)
-            near = np.where(inside, self.nearest_free[:, rr, cc], self.nearest_occ[:, rr, cc])
-            box_lo = np.column_stack((near[1], near[0])).astype(float)
-            d = gv - np.clip(gv, box_lo, box_lo + 1.0)   # from the box's closest point to gv
-            dd = np.hypot(d[:, 0], d[:, 1])
-            better = dd < best
-            best = np.where(better, dd, best)
-            diff[better] = d[better]
-        dist = best
-        unit = np.divide(diff, dist[:, None], out=np.zeros_like(diff), where=dist[:, None] > 0)
-        sign = np.where(inside, -1.0, 1.0)
-        # inside a wall the distance is to the nearest free box and grows away from it
-        s[valid] = sign * dist * self.resolution + self.depth
-        grad[valid] = (sign[:, None] * unit) @ rot.T
-        return s, grad, valid
+def _touches(mask: np.ndarray) -> np.ndarray:
+    """(H + 1, W + 1) lattice points with at least one of their four cells in ``mask``."""
+    pad = np.pad(mask, 1, constant_values=False)
+    return pad[:-1, :-1] | pad[:-1, 1:] | pad[1:, :-1] | pad[1:, 1:]
 
 
 @dataclass(frozen=True)
