@@ -1,5 +1,5 @@
-"""localization/localizer.py: vicinity score (eq. 10), candidate ranking, frames, statuses and
-bad input."""
+"""localization/localizer.py: vicinity score (eq. 10), the stages (pose votes, spectral coarse
+ranking, correlative search, refinement), frames, the status policy and bad input."""
 from __future__ import annotations
 
 import math
@@ -9,9 +9,10 @@ import pytest
 
 from ssm_localization import (GlobalLocalizer, IndexConfig, Localization, LocalizerConfig,
                               SimulationConfig, build_index, prepare_scan, read_bag, simulate)
-from ssm_localization.localization.localizer import STATUSES, vicinity_score
+from ssm_localization.localization.localizer import (STATUSES, Hypothesis, verdict,
+                                                    vicinity_score)
+from ssm_localization.localization.verify import BeamCheck
 from ssm_localization.mapping.map_io import OccupancyMap
-from ssm_localization.matching.matcher import spectral_score
 from ssm_localization.mapping.raycast import cast_rays
 from ssm_localization.matching.scan import ranges_to_points
 from ssm_localization.transforms import wrap_angle
@@ -41,15 +42,15 @@ def depot():
 
 @pytest.fixture(scope='module')
 def localizer(depot):
-    return GlobalLocalizer(depot[1], LocalizerConfig(surface_depth=0.0))
+    return GlobalLocalizer(depot[1])            # the defaults: no setting for simulated scans
 
 
 @pytest.fixture(scope='module')
 def query(depot, localizer):
     bag, _ = depot
     s = bag.scans[0]
-    pts, _ = ranges_to_points(s.ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max)
-    return prepare_scan(pts, localizer.matcher_config)
+    return localizer.prepare_scan(s.ranges, s.angle_min, s.angle_increment, s.range_min,
+                                  s.range_max)
 
 
 # --------------------------------------------------------------------------- eq. (10)
@@ -105,41 +106,74 @@ def test_vicinity_empty_inputs():
     assert vicinity_score(_grid_points(), np.zeros((0, 2)), (0.0, 0.0, 0.0), 0.05) == 0.0
 
 
-# --------------------------------------------------------------------------- candidates
+# --------------------------------------------------------------------------- stages
 
-def test_prefilter_returns_distinct_valid_nodes(localizer, query):
-    nodes = localizer.prefilter(query)
+def _truth(depot, k: int = 0):
+    bag, _ = depot
+    return bag.ground_truth[bag.scans[k].stamp]
+
+
+def test_pose_votes_peak_at_the_true_pose(depot, localizer, query):
+    votes = localizer.voting.vote(query.features)
+    assert len(votes) > 0 and (votes.weight > 0).all()
+    peaks = localizer.voting.peaks(votes, 5)
+    assert 1 <= len(peaks) <= 5
+    strength = [p.strength for p in peaks]
+    assert strength == sorted(strength, reverse=True)
+    x, y, yaw = _truth(depot)
+    # the strongest peak is the true place (its bin: 0.5 m, 10 deg)
+    px, py, pyaw = peaks[0].pose
+    assert math.hypot(px - x, py - y) < 1.0 and abs(wrap_angle(pyaw - yaw)) < math.radians(15)
+
+
+def test_spectral_hypotheses_are_ranked_peaks_matched_by_ransac(depot, localizer, query):
+    hyps = localizer.spectral_hypotheses(query)
+    assert 1 <= len(hyps) <= localizer.config.top_n
+    assert all(h.source == 'spectral' and h.spectral > 0 for h in hyps)
+    energy = [h.spectral for h in hyps]
+    assert energy == sorted(energy, reverse=True)          # coarse ranking by eq. (5)
     n = len(localizer.index.features)
-    assert len(nodes) == min(localizer.config.prefilter, n)
-    assert len(set(int(k) for k in nodes)) == len(nodes)
-    assert all(0 <= k < n for k in nodes)
+    assert all(0 <= h.node < n for h in hyps)
+    assert min(_err(localizer.base_pose(h.initial_pose), _truth(depot))[0] for h in hyps) < 0.2
 
 
-def test_prefilter_disabled_and_paper_mode_keep_all_nodes(depot, query):
-    index = depot[1]
-    for cfg in (LocalizerConfig(prefilter=0), LocalizerConfig(paper_mode=True)):
-        nodes = GlobalLocalizer(index, cfg).prefilter(query)
-        assert sorted(nodes.tolist()) == list(range(len(index.features)))
+def test_search_at_the_true_yaw_finds_the_place(depot, localizer, query):
+    truth = _truth(depot)
+    found = localizer.search_hypotheses(query, [], yaws=np.array([truth[2]]))
+    assert found and all(h.source == 'search' for h in found)
+    # a cell of the grid and exactly the yaw asked for
+    assert _err(found[0].initial_pose, truth)[0] < 0.1
+    assert abs(wrap_angle(found[0].initial_pose[2] - truth[2])) < 1e-9
 
 
-def test_coarse_keeps_top_n_sorted_by_spectral_score(localizer, query):
-    nodes = np.arange(0, len(localizer.index.features), 4)       # every 4th node
-    hyps = localizer.coarse(query, nodes)
-    assert len(hyps) == localizer.config.top_n
-    spectral = [h.spectral for h in hyps]
-    assert spectral == sorted(spectral, reverse=True)
-    assert len({h.node for h in hyps}) == len(hyps)
-    # they are the top_n of all scores, and the scores are eq. (5) of spectral_score
-    everything = sorted((spectral_score(localizer.index.features[k], query,
-                                        localizer.matcher_config)[0] for k in nodes),
-                        reverse=True)
-    assert spectral == pytest.approx(everything[:len(hyps)])
+def test_search_seeded_by_a_flipped_hypothesis_finds_the_place(depot, localizer, query):
+    """Seeds give their yaw and its flip: a hypothesis facing the wrong way still leads there."""
+    x, y, yaw = _truth(depot)
+    wrong = Hypothesis(source='spectral', initial_pose=(x + 7.0, y - 3.0, yaw + math.pi))
+    found = localizer.search_hypotheses(query, [wrong])
+    assert min(_err(h.initial_pose, (x, y, yaw))[0] for h in found) < 0.1
 
 
-def test_coarse_with_fewer_nodes_than_top_n(localizer, query):
-    hyps = localizer.coarse(query, np.array([3, 1]))
-    assert sorted(h.node for h in hyps) == [1, 3]
-    assert hyps[0].spectral >= hyps[1].spectral
+def test_search_window_limits_the_positions(depot, localizer, query):
+    x, y, yaw = _truth(depot)
+    box = (x + 2.0, y + 2.0, x + 3.0, y + 3.0)               # a box away from the truth
+    found = localizer.search_hypotheses(query, [], window=box, yaws=np.array([yaw]))
+    for h in found:
+        assert box[0] - 0.05 <= h.initial_pose[0] <= box[2] + 0.05
+        assert box[1] - 0.05 <= h.initial_pose[1] <= box[3] + 0.05
+
+
+def test_refine_estimates_the_wall_offset_of_ray_cast_scans(depot, localizer, query):
+    """The defaults' prior puts walls half a cell deep; ray-cast scans pull it to the boundary."""
+    truth = _truth(depot)
+    hyp = Hypothesis(source='prior', initial_pose=(truth[0] + 0.08, truth[1] - 0.05,
+                                                   truth[2] + 0.02))
+    refined = localizer.refine(query, [hyp])[0]
+    res = localizer.index.map.resolution
+    assert localizer.config.surface_depth == 0.5
+    assert refined.depth < 0.15 * res
+    assert _err(refined.pose, truth)[0] < 0.005
+    assert refined.explained > 0.9 and refined.refined
 
 
 def test_localization_result_fields(depot, localizer):
@@ -149,14 +183,15 @@ def test_localization_result_fields(depot, localizer):
                                   s.range_max)
     _assert_close(loc, bag.ground_truth[s.stamp], xy=0.01)
     assert loc.status in STATUSES and loc.ok
-    assert 0 <= loc.node < len(index.features)
-    assert loc.node in {h.node for h in loc.candidates}
+    assert -1 <= loc.node < len(index.features)
+    assert loc.candidates[0].pose == loc.pose and loc.candidates[0].check is not None
     assert np.isfinite(loc.score) and loc.latency_ms > 0
     cov = np.asarray(loc.covariance)
     assert cov.shape == (3, 3)
     assert np.allclose(cov, cov.T, atol=1e-15)
     assert np.linalg.eigvalsh(cov).min() > 0
-    assert math.sqrt(np.linalg.eigvalsh(cov[:2, :2]).max()) < 0.05   # confident: a few cm
+    assert math.sqrt(np.linalg.eigvalsh(cov[:2, :2]).max()) < 0.08   # confident: a few cm
+    assert loc.stages and sum(loc.stages.values()) <= loc.latency_ms + 1e-6
 
 
 def test_paper_mode_picks_largest_vicinity(depot):
@@ -186,13 +221,13 @@ def test_laser_pose_offset_gives_base_pose(depot, offset_sim, index_offset):
         # Table 1: the node's virtual laser sits at (x, y, 0) composed with the sensor pose
         x, y = index.node_xy[0]
         assert np.allclose(index.node_sensor_pose[0], (x + OFFSET[0], y + OFFSET[1], OFFSET[2]))
-    loc = GlobalLocalizer(index, LocalizerConfig(surface_depth=0.0, laser_pose=OFFSET))
+    loc = GlobalLocalizer(index, LocalizerConfig(laser_pose=OFFSET))
     for scan, base, laser in zip(offset_sim.scans, offset_sim.poses, offset_sim.sensor_poses):
         out = loc.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
                                 scan.range_min, scan.range_max)
         _assert_close(out, base, xy=0.01, yaw_deg=0.2)
         assert _err(out.pose, laser)[0] > 0.2        # it is not the laser's pose
-        best = next(h for h in out.candidates if h.node == out.node)
+        best = out.candidates[0]
         assert _err(best.laser_pose, laser)[0] < 0.01       # the hypothesis keeps the laser pose
 
 
@@ -207,7 +242,8 @@ def test_base_covariance_is_propagated_through_the_lever_arm(depot):
     """cov_base = J cov_laser J^T with J the derivative of base = laser * inverse(laser_pose)."""
     from ssm_localization.transforms import compose, inverse
     lp = (1.5, -0.4, 0.7)
-    loc = GlobalLocalizer(depot[1], LocalizerConfig(laser_pose=lp))
+    loc = GlobalLocalizer(depot[1], LocalizerConfig(laser_pose=lp, covariance_scale=1.0,
+                                                    min_position_std=0.0, min_yaw_std=0.0))
     laser = (3.0, 4.0, -2.2)
     cov_laser = np.array([[4e-4, 1e-4, 2e-5], [1e-4, 9e-4, -3e-5], [2e-5, -3e-5, 1e-4]])
     h = 1e-6
@@ -220,7 +256,7 @@ def test_base_covariance_is_propagated_through_the_lever_arm(depot):
         diff = plus - minus
         diff[2] = wrap_angle(diff[2])
         jac[:, i] = diff / (2 * h)
-    got = loc._base_covariance(cov_laser, laser)
+    got = loc.report_covariance(cov_laser, laser)
     assert np.allclose(got, jac @ cov_laser @ jac.T, rtol=1e-5, atol=1e-12)
     assert got[0, 0] > cov_laser[0, 0]             # the yaw uncertainty moves the base
 
@@ -250,6 +286,83 @@ def test_corridor_scan_is_never_a_confident_answer():
         statuses.append(out.status)
         assert out.status in ('ambiguous', 'failed'), (x, out.pose, out.message)
     assert statuses
+
+
+def _verified(pose, score, std=0.03) -> Hypothesis:
+    return Hypothesis(source='search', initial_pose=pose, laser_pose=pose, pose=pose, refined=True,
+                      explained=score, score=score,
+                      check=BeamCheck(consistent=0.9, contradicting=0.0, short=0.1),
+                      covariance=np.diag([std ** 2, std ** 2, 1e-4]))
+
+
+def test_verdict_status_policy():
+    cfg = LocalizerConfig()
+    m = cfg.ambiguity_margin
+    best = _verified((0.0, 0.0, 0.0), 0.8)
+    status, _, _ = verdict([best, _verified((5.0, 0.0, 0.0), 0.8 - 2 * m)], cfg)
+    assert status == 'ok'                                    # the rival is clearly worse
+    status, msg, cov = verdict([best, _verified((5.0, 0.0, 0.0), 0.8 - m / 2)], cfg)
+    assert status == 'ambiguous' and 'distinct' in msg
+    assert cov[0, 0] >= 2.5 ** 2                             # the covariance spans both places
+    # the same place found twice is not a rival
+    assert verdict([best, _verified((0.1, 0.0, 0.01), 0.8)], cfg)[0] == 'ok'
+    # a turn more than distinct_yaw away at the same spot is
+    assert verdict([best, _verified((0.0, 0.0, 0.5), 0.8)], cfg)[0] == 'ambiguous'
+    status, msg, _ = verdict([_verified((0.0, 0.0, 0.0), cfg.min_score - 0.01)], cfg)
+    assert status == 'failed' and 'too little' in msg
+    through = _verified((0.0, 0.0, 0.0), 0.8)
+    through.check = BeamCheck(consistent=0.5, contradicting=cfg.max_contradicting + 0.01,
+                              short=0.0)
+    status, msg, _ = verdict([through], cfg)
+    assert status == 'failed' and 'through walls' in msg
+    # uncertainty beyond the tolerance along some direction: ambiguous, within it: ok
+    status, msg, _ = verdict([_verified((0.0, 0.0, 0.0), 0.8, 1.5 * cfg.max_position_std)], cfg)
+    assert status == 'ambiguous' and msg.startswith('degenerate')
+    assert verdict([_verified((0.0, 0.0, 0.0), 0.8, 0.9 * cfg.max_position_std)], cfg)[0] == 'ok'
+
+
+def _identical_rooms(n: int = 5, size: float = 3.0, res: float = 0.05) -> OccupancyMap:
+    """An n x n block of identical square rooms, each with the same door and the same table."""
+    cells = int(round(size / res))
+    d = np.zeros((n * cells + 2, n * cells + 2), np.int8)
+    for i in range(n + 1):
+        d[i * cells:i * cells + 2, :] = 100
+        d[:, i * cells:i * cells + 2] = 100
+    for i in range(n):
+        for j in range(n):
+            r0, c0 = i * cells, j * cells
+            d[r0 + 2:r0 + cells, c0 + cells // 3:c0 + cells // 3 + 16] = 0 if i else 100   # door
+            d[r0 + 12:r0 + 18, c0 + 14:c0 + 30] = 100                                      # table
+    return OccupancyMap(d, res)
+
+
+@pytest.fixture(scope='module')
+def rooms():
+    occ = _identical_rooms()
+    return occ, GlobalLocalizer(build_index(occ))
+
+
+def test_identical_rooms_are_never_a_confident_answer(rooms):
+    """Places that look the same are ambiguous even when they are not all among the first
+    hypotheses: the correlative search over the whole map finds the twins."""
+    occ, loc = rooms
+    sim = simulate(occ, SimulationConfig(count=4, seed=3))
+    for scan, truth in zip(sim.scans, sim.poses):
+        out = loc.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                                scan.range_min, scan.range_max)
+        assert out.status == 'ambiguous', (truth, out.pose, out.message)
+        far = [h for h in out.candidates if h.check is not None
+               and _err(h.pose, out.pose)[0] > 2.0]
+        assert far, 'the rival rooms are among the verified hypotheses'
+
+
+def test_a_scan_of_another_building_is_not_ok(rooms):
+    _, loc = rooms
+    bag = read_bag(BAGS / 'intel_queries')
+    for scan in bag.scans[:5]:
+        out = loc.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                                scan.range_min, scan.range_max)
+        assert out.status != 'ok', out.message
 
 
 # --------------------------------------------------------------------------- bad input

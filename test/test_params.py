@@ -42,10 +42,10 @@ def test_from_dict_rejects_unknown_keys_by_name():
 
 
 def test_from_dict_coerces_simple_types():
-    cfg = from_dict(LocalizerConfig, {'top_n': 3.0, 'prefilter': '12', 'sigma_d': 1,
+    cfg = from_dict(LocalizerConfig, {'top_n': 3.0, 'vote_peaks': '12', 'sigma_d': 1,
                                       'beam_tolerance': '0.2', 'laser_pose': [1, '2', 0.5]})
     assert cfg.top_n == 3 and type(cfg.top_n) is int
-    assert cfg.prefilter == 12 and type(cfg.prefilter) is int
+    assert cfg.vote_peaks == 12 and type(cfg.vote_peaks) is int
     assert cfg.sigma_d == 1.0 and type(cfg.sigma_d) is float
     assert cfg.beam_tolerance == 0.2
     assert cfg.laser_pose == (1.0, 2.0, 0.5) and isinstance(cfg.laser_pose, tuple)
@@ -103,7 +103,7 @@ def test_load_configs_flat_file(tmp_path):
     assert (loc_cfg.top_n, loc_cfg.sigma_d) == (3, 0.07)
     assert index_cfg.beams == 180 and index_cfg.topology.arc_spacing == 3.0
     assert index_cfg.matcher.max_points == 90
-    assert loc_cfg.prefilter == LocalizerConfig().prefilter      # untouched fields keep defaults
+    assert loc_cfg.vote_peaks == LocalizerConfig().vote_peaks      # untouched fields keep defaults
 
 
 def test_load_configs_ros_params_file(tmp_path):

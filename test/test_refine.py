@@ -1,5 +1,6 @@
-"""localization/refine.py, verify.py: wall-surface signed distance, Gauss-Newton pose
-refinement, ray-cast beam check."""
+"""localization/refine.py, verify.py: wall-surface signed distance (exact on its half-cell
+lattice, interpolated between), Gauss-Newton pose refinement with the wall offset estimated,
+ray-cast beam check."""
 from __future__ import annotations
 
 import math
@@ -50,7 +51,7 @@ def test_signed_distance_zero_on_cell_boundary(surface):
     pts = np.array([[0.5, 0.95], [0.8, 0.8], [1.1, 1.0], [0.5, 0.8], [0.8, 1.2]])
     s, _, valid = surface.signed_distance(pts)
     assert valid.all()
-    assert np.allclose(s, 0.0, atol=1e-12)
+    assert np.allclose(s, 0.0, atol=1e-6)
 
 
 def test_signed_distance_sign_and_magnitude(surface):
@@ -58,15 +59,15 @@ def test_signed_distance_sign_and_magnitude(surface):
     free = np.array([[0.27, 1.0], [0.8, 0.63]])
     s, grad, valid = surface.signed_distance(free)
     assert valid.all()
-    assert np.allclose(s, [0.23, 0.17], atol=1e-9)
-    assert np.allclose(grad, [[-1.0, 0.0], [0.0, -1.0]], atol=1e-9)   # away from the wall
-    # diagonally off the corner (0.5, 0.8): Euclidean distance to the corner
+    assert np.allclose(s, [0.23, 0.17], atol=1e-6)
+    assert np.allclose(grad, [[-1.0, 0.0], [0.0, -1.0]], atol=1e-6)   # away from the wall
+    # diagonally off the corner (0.5, 0.8), on a lattice point: distance to the corner
     s, _, _ = surface.signed_distance(np.array([[0.4, 0.7]]))
-    assert s[0] == pytest.approx(math.hypot(0.1, 0.1), abs=1e-9)
+    assert s[0] == pytest.approx(math.hypot(0.1, 0.1), abs=1e-6)
     # inside the block, 0.04 m behind the left face (the nearest free cell)
     s, grad, _ = surface.signed_distance(np.array([[0.54, 1.0]]))
-    assert s[0] == pytest.approx(-0.04, abs=1e-9)
-    assert np.allclose(grad[0], [-1.0, 0.0], atol=1e-9)   # increases towards free space
+    assert s[0] == pytest.approx(-0.04, abs=1e-6)
+    assert np.allclose(grad[0], [-1.0, 0.0], atol=1e-6)   # increases towards free space
 
 
 def test_signed_distance_depth_shifts_surface():
@@ -74,7 +75,7 @@ def test_signed_distance_depth_shifts_surface():
     deep = SurfaceModel.from_occupancy(occ, RES, (0.0, 0.0, 0.0), 0.5)
     s, _, _ = deep.signed_distance(np.array([[0.5, 1.0], [0.55, 1.0], [0.3, 1.0]]))
     # the surface lies half a cell (0.05 m) behind the boundary: at the occupied cell centres
-    assert np.allclose(s, [0.05, 0.0, 0.25], atol=1e-9)
+    assert np.allclose(s, [0.05, 0.0, 0.25], atol=1e-6)
 
 
 def test_signed_distance_matches_brute_force_with_rotated_origin():
@@ -87,9 +88,17 @@ def test_signed_distance_matches_brute_force_with_rotated_origin():
     world = g * RES @ rotation(origin[2]).T + origin[:2]
     s, grad, valid = model.signed_distance(world)
     assert valid.all()
-    assert np.allclose(s, _brute_signed_distance(occ, g) * RES, atol=1e-9)
+    err = np.abs(s - _brute_signed_distance(occ, g) * RES)
+    # interpolation between lattice points: exact along faces, within a quarter of a cell near
+    # corners (this grid is one eighth clutter: mostly corners)
+    assert err.max() < 0.25 * RES and err.mean() < 0.03 * RES
+    # on the lattice itself it is exact
+    lat = rng.integers(1, 47, (200, 2)) / 2.0 + 0.5
+    sl, _, _ = model.signed_distance(lat * RES @ rotation(origin[2]).T + origin[:2])
+    assert np.allclose(sl, _brute_signed_distance(occ, lat) * RES, atol=1e-6)
     away = np.abs(s) > 1e-3
-    assert np.allclose(np.linalg.norm(grad[away], axis=1), 1.0, atol=1e-9)
+    norm = np.linalg.norm(grad[away], axis=1)
+    assert np.median(np.abs(norm - 1.0)) < 0.05     # unit length but near corners
     # the gradient is the derivative of the signed distance (central differences)
     h = 1e-5
     for axis in (0, 1):

@@ -1,54 +1,120 @@
-"""Localizer settings (paper section IV and the verification beyond it)."""
+"""Localizer settings (paper section IV and what v2 adds around it)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-
-import numpy as np
 
 from .fields import param
 
 
 @dataclass(frozen=True)
 class LocalizerConfig:
-    """Parameters of the localizer (the matcher's own come from the index it was built with)."""
+    """Parameters of the localizer (the matcher's own come from the index it was built with).
 
-    top_n: int = param(10, 'candidate nodes kept by the spectral coarse stage (paper: N = 5)')
-    prefilter: int = param(20, 'nodes kept by descriptor voting before spectral ranking; 0 = all')
-    vote_neighbours: int = param(8, 'nodes each query descriptor votes for (its nearest ones)')
-    sigma_d: float = param(0.05, 'eq. (10) vicinity score distance scale, metres')
+    Lengths in metres, angles in radians. See ``localization/localizer.py`` for the pipeline.
+    """
+
+    # -- pose voting and spectral matching (coarse and fine stages)
+    vote_neighbours: int = param(20, 'map features each query point is paired with (nearest '
+                                     'descriptors) to vote for a pose')
+    vote_bin_xy: float = param(0.5, 'position bin of the pose-vote histogram, metres')
+    vote_bin_yaw: float = param(math.radians(10.0), 'yaw bin of the pose-vote histogram, rad')
+    vote_peaks: int = param(16, 'strongest pose-vote peaks whose correspondences are matched '
+                                'spectrally (eqs. 2-6)')
+    top_n: int = param(10, 'peaks kept by the spectral coarse ranking (eq. 5) for the RANSAC '
+                           'fine pose; paper mode: nodes kept (paper: N = 5)')
+    fine_ransac_iterations: int = param(60, '2-point RANSAC draws per peak (eqs. 7-8)')
+    # -- correlative search over the whole map at the hypotheses' yaws
+    search: bool = param(True, 'branch-and-bound correlative search over the whole map at the '
+                               'yaws of the best hypotheses and their flips')
+    search_seeds: int = param(4, 'hypotheses whose yaws (and flipped yaws) seed the search')
+    search_spread: float = param(math.radians(1.0), 'searched yaws: each seed +- this, in '
+                                                    'steps of search_step, rad')
+    search_step: float = param(math.radians(1.0), 'yaw step of the correlative search, rad')
+    search_min_score: float = param(0.5, 'correlative score (mean point likelihood) below which '
+                                         'no pose is kept')
+    search_ratio: float = param(0.9, 'keep search leaves within this ratio of the best one')
+    search_keep: int = param(4, 'distinct search leaves added as hypotheses')
+    search_depth: int = param(5, 'levels of the branch and bound (top windows 2^depth cells)')
+    search_sigma: float = param(0.1, 'width of the correlative likelihood, metres')
+    search_points: int = param(60, 'scan points (of the spatially even set) the search scores')
+    search_alignments: int = param(2, 'further seed yaws from aligning the scan\'s wall '
+                                      'directions with the map\'s')
+    search_budget: float = param(0.2, 'seconds after which the search stops with what it has')
+    # -- refinement on the wall surface
+    refine_hypotheses: int = param(8, 'hypotheses refined on the wall surface (best by '
+                                      'correlative score)')
+    refine_iterations: int = param(10, "Gauss-Newton iterations on the map's wall surface")
+    refine_radius: tuple[float, float] = param(
+        (0.5, 0.1), 'Gauss-Newton truncation radius, first to last iteration, metres')
+    surface_depth: float = param(0.5, 'prior of where walls lie behind the occupied-cell '
+                                      'boundary, cells (estimated per scan from there)')
+    surface_depth_std: float = param(0.1, 'standard deviation of that prior, cells')
+    polish_iterations: int = param(6, 'Gauss-Newton iterations of the best pose on every '
+                                      'endpoint of the scan (0: none)')
+    estimate_depth: bool = param(True, 'estimate the wall-surface offset from the scan itself')
+    # -- verification and the answer
+    verify_hypotheses: int = param(3, 'refined hypotheses checked by ray casting, at least (best '
+                                      'explained first)')
+    verify_margin: float = param(0.1, '... and every one whose explained fraction is within this '
+                                      'of the best')
+    verify_beams: int = param(120, 'beams (evenly chosen) ray-cast per verified hypothesis')
+    max_cast_range: float = param(30.0, 'ray-cast range of the beam check and points used by '
+                                        'the correlative search, metres')
+    beam_tolerance: float = param(0.15, 'metres (+2 % of the range) for a beam to agree with '
+                                        'the map')
+    score_sigma: float = param(0.05, 'residual scale of the explained fraction '
+                                     'mean(exp(-r^2 / 2 sigma^2)), metres')
+    contradiction_weight: float = param(1.0, 'score = explained fraction - this x fraction of '
+                                             'beams seeing through walls')
+    max_contradicting: float = param(0.35, 'a pose with more of its beams seeing through walls '
+                                           'is implausible; with no plausible pose: failed')
+    min_score: float = param(0.4, 'a best pose scoring less (explained fraction minus the '
+                                  'through-wall penalty): failed')
+    ambiguity_margin: float = param(0.02, 'a distinct rival scoring within this of the best: '
+                                          'ambiguous')
+    distinct_xy: float = param(0.5, 'poses further apart than this are distinct, metres')
+    distinct_yaw: float = param(math.radians(10.0), '... or than this, rad')
+    max_position_std: float = param(0.25, 'a larger reported position std along the weakest '
+                                          'direction: ambiguous (2 sigma beyond the 0.5 m '
+                                          'success tolerance: a corridor too bare to tell), m')
+    covariance_scale: float = param(100.0, 'Gauss-Newton covariance multiplier (neighbouring '
+                                          'residuals are correlated)')
+    min_position_std: float = param(0.035, 'floor of the reported position std, metres')
+    min_yaw_std: float = param(math.radians(0.5), 'floor of the reported yaw std, rad')
+    min_points: int = param(10, 'fewer valid beams than this: failed')
     laser_pose: tuple[float, float, float] = param(
         (0.0, 0.0, 0.0), "the laser's pose on the robot base (x, y, yaw); the nodes set it from "
         'laser_x/laser_y/laser_yaw')
-    paper_mode: bool = param(False, 'plain paper pipeline: no prefilter, refinement or map check')
-    fine_icp: bool = param(True, 'matcher ICP in the fine stage (better hypotheses on real scans)')
-    fine_icp_iterations: int = param(15, 'matcher ICP iterations per candidate')
-    fine_polish: bool = param(True, 'matcher least-squares polish after its ICP')
-    fine_retries: int = param(0, 'matcher retries on further spectral clusters per candidate')
-    fine_ransac_hypotheses: int = param(3, 'RANSAC hypotheses the matcher may refine per candidate')
-    refine: bool = param(True, "Gauss-Newton on the map's wall surface")
-    surface_depth: float = param(0.5, 'cells behind the occupied-cell boundary where walls are')
-    refine_iterations: int = param(12, "Gauss-Newton iterations on the map's wall surface")
-    refine_radius: tuple[float, float] = param(
-        (0.3, 0.1), 'truncation radius, first to last iteration (m)')
-    max_cast_range: float = param(30.0, 'ray-cast range for the beam check, metres')
-    beam_tolerance: float = param(
-        0.15, 'metres (+2 % of the range) for a beam to agree with the map')
-    min_consistent: float = param(0.5, 'fewer beams agreeing with the map rejects a hypothesis')
-    max_contradicting: float = param(0.3, 'more beams seeing through walls rejects it')
-    contradiction_weight: float = param(
-        2.0, 'fit = cost / inlier_distance^2 + this * through-wall fraction')
-    max_fit: float = param(0.75, 'a best fit above this explains too little of the scan: failed')
-    ambiguity_ratio: float = param(
-        1.5, 'a distinct rival whose fit is within this factor: ambiguous')
-    inlier_distance: float = param(0.1, 'endpoints further from the walls count as outliers (m)')
-    distinct_xy: float = param(0.5, 'poses further apart than this are distinct (m) ')
-    distinct_yaw: float = param(np.deg2rad(10.0), '... or than this (rad)')
-    min_points: int = param(10, 'fewer valid beams than this: failed')
-    max_position_std: float = param(
-        0.15, 'a larger position std (m) of the refined fit: degenerate')
+    # -- the plain paper pipeline, for comparison
+    paper_mode: bool = param(False, 'the plain paper pipeline: every node ranked by its spectral '
+                                    'score, RANSAC + least squares on the top_n, the largest '
+                                    'vicinity score wins, always ok')
+    sigma_d: float = param(0.05, 'paper mode: eq. (10) vicinity score distance scale, metres')
 
     def __post_init__(self) -> None:
-        if self.top_n < 1:
-            raise ValueError('top_n must be >= 1')
-        if self.sigma_d <= 0:
-            raise ValueError('sigma_d must be > 0')
+        positive = ('vote_neighbours', 'vote_bin_xy', 'vote_bin_yaw', 'vote_peaks', 'top_n',
+                    'fine_ransac_iterations', 'search_seeds', 'search_step', 'search_keep',
+                    'search_depth', 'search_sigma', 'search_budget', 'search_points', 'verify_beams', 'refine_hypotheses',
+                    'verify_hypotheses', 'max_cast_range', 'surface_depth_std', 'beam_tolerance', 'score_sigma',
+                    'distinct_xy', 'distinct_yaw', 'max_position_std', 'covariance_scale',
+                    'sigma_d')
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f'LocalizerConfig.{name} must be a finite number > 0, '
+                                 f'got {value!r}')
+        for name in ('search_spread', 'search_alignments', 'refine_iterations', 'polish_iterations', 'surface_depth', 'search_min_score',
+                     'contradiction_weight', 'max_contradicting', 'min_score', 'verify_margin', 'ambiguity_margin',
+                     'min_position_std', 'min_yaw_std', 'min_points'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f'LocalizerConfig.{name} must be a finite number >= 0, '
+                                 f'got {value!r}')
+        if not 0.0 < self.search_ratio <= 1.0:
+            raise ValueError(f'LocalizerConfig.search_ratio must be in (0, 1], got '
+                             f'{self.search_ratio!r}')
+        lo, hi = (float(v) for v in self.refine_radius)
+        if not (0 < hi <= lo and math.isfinite(lo)):
+            raise ValueError(f'LocalizerConfig.refine_radius must be (first, last) with first >= '
+                             f'last > 0, got {self.refine_radius!r}')

@@ -1,21 +1,34 @@
 """Global localization of one laser scan on an indexed map (paper section IV, and beyond).
 
-Pipeline for one query scan (laser frame points ``q``):
-1. prefilter (beyond the paper): every query descriptor votes for the ``vote_neighbours`` nodes
-   holding its nearest descriptors (one distance matrix against all node descriptors, stacked at
-   start-up); the ``prefilter`` most voted nodes go on;
-2. coarse (IV.A): rank those nodes by the spectral matching score (eq. 5 at the binarized
-   solution of eq. 6); keep the top ``top_n``;
-3. fine (IV.B): RANSAC pose of the query against each candidate's virtual scan, vicinity score
-   (eq. 10, ``sigma_d``); the node frame turns the local pose into a map-frame laser pose;
-4. beyond the paper: each hypothesis is refined on the map's wall surface (``refine.py``) and
-   verified by ray casting (``verify.py``); the status is ``ok`` / ``ambiguous`` / ``failed``.
-With ``paper_mode=True`` steps 1 and 4 and the matcher's ICP are skipped and the largest
-vicinity score wins: the plain method of the paper (``bench localize --paper`` compares both).
+Pipeline for one query scan (``LocalizerConfig`` names the knobs):
+1. query features (II.A): spatially even points, tangents (eq. 1), shape descriptors;
+2. pose voting (beyond the paper, ``voting.py``): the virtual-scan features of every GVD node
+   are pooled in the map frame; each query point's nearest descriptors vote for the pose they
+   imply; the ``vote_peaks`` strongest peaks of the vote histogram are candidate places;
+3. coarse (IV.A): the correspondences of each peak are matched spectrally -- affinity G (eqs.
+   2-4), leading eigenvector and binarization (eq. 6) -- and the peaks are ranked by their
+   spectral score (eq. 5); the ``top_n`` best go on;
+4. fine (IV.B): 2-point RANSAC and least squares (eqs. 7-8) on each peak's consistent
+   correspondences give a pose hypothesis;
+5. correlative search (beyond the paper, ``correlative.py``): branch and bound over the whole
+   map at the yaws of the best hypotheses and their flips, which finds the places the voting
+   missed (typically a corridor whose position along it only far walls tell);
+6. refinement (``refine.py``): Gauss-Newton on the map's wall surface, the surface offset
+   estimated from the scan; the explained fraction ``mean exp(-r^2 / 2 score_sigma^2)`` over the
+   even points measures how much of the scan a pose explains;
+7. verification (``verify.py``): ray casting; beams seeing through walls count against a pose;
+8. the answer: ``failed`` when the best pose explains too little of the scan, ``ambiguous`` when a
+   distinct pose scores within ``ambiguity_margin`` or the geometry leaves the position
+   undetermined beyond ``max_position_std``, else ``ok``; the covariance is the Gauss-Newton one,
+   scaled and floored (``covariance_scale``, ``min_position_std``, ``min_yaw_std``).
+``paper_mode`` runs the paper's own pipeline instead: every node ranked by the spectral score of
+the query against its virtual scan, RANSAC + least squares on the ``top_n`` best, the largest
+vicinity score (eq. 10) wins, always ``ok``.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -25,40 +38,57 @@ from scipy.spatial import cKDTree
 from ..config.localization import LocalizerConfig
 from ..mapping.index import MapIndex
 from ..mapping.raycast import RayCaster
-from ..matching.descriptors import descriptor_distances
-from ..matching.features import prepare_scan
+from ..matching.features import ScanFeatures, prepare_scan
 from ..matching.matcher import match_features, spectral_score, spectral_solution
+from ..matching.pairwise import affinity_matrix, angle_table, distance_table
+from ..matching.ransac import ransac_hypotheses
 from ..matching.scan import ranges_to_points
+from ..matching.spectral import binarize, leading_eigenvector, matching_score
 from ..transforms import Pose2, apply, compose, inverse, wrap_angle
+from .correlative import CorrelativeGrid
 from .refine import SurfaceModel, refine_poses
 from .verify import BeamCheck, check_beams
+from .voting import PoseVoting, Votes, alignment_yaws
 
 STATUSES = ('ok', 'ambiguous', 'failed')
+#: where a hypothesis came from
+SOURCES = ('spectral', 'search', 'prior', 'paper')
 
 
 @dataclass
 class Hypothesis:
-    """One candidate pose: a node, its scores and the resulting laser pose in the map frame."""
+    """One candidate pose. ``laser_pose`` is the laser in the map frame, ``pose`` the base."""
 
-    node: int
-    spectral: float
-    solution: tuple | None = field(default=None, repr=False)   # eqs. (2)-(6), reused by fine
-    vicinity: float = 0.0
+    source: str
+    initial_pose: Pose2                     # laser pose before refinement
+    node: int = -1                          # GVD node whose features voted most for it
+    spectral: float = 0.0                   # eq. (5) score of its correspondences
+    correlative: float = 0.0                # mean point likelihood before refinement
     laser_pose: Pose2 = (0.0, 0.0, 0.0)
-    pose: Pose2 = (0.0, 0.0, 0.0)           # base pose in the map frame
-    covariance: np.ndarray | None = None
+    pose: Pose2 = (0.0, 0.0, 0.0)
+    covariance: np.ndarray | None = None    # (3, 3) x, y, yaw of the base, as reported
+    explained: float = 0.0                  # mean exp(-r^2 / 2 score_sigma^2) after refinement
+    depth: float = 0.0                      # estimated wall-surface offset, metres
     check: BeamCheck | None = None
-    cost: float = float('inf')              # mean truncated squared surface residual (m^2)
-    fit: float = float('inf')               # cost normalized, plus the through-wall penalty
+    vicinity: float = 0.0                   # eq. (10), paper mode
+    refined: bool = False
+    score: float = 0.0                      # explained - weight x through-wall fraction
 
     @property
-    def score(self) -> float:
-        """Beam agreement with the map once verified, else the vicinity score of eq. (10)."""
-        return self.check.score if self.check is not None else self.vicinity
+    def contradicting(self) -> float:
+        return self.check.contradicting if self.check is not None else 0.0
 
-    def plausible(self, cfg: LocalizerConfig) -> bool:
-        return (self.check is not None and self.check.consistent >= cfg.min_consistent
-                and self.check.contradicting <= cfg.max_contradicting)
+
+@dataclass
+class Query:
+    """One scan, prepared once: ``features`` (spatially even points, tangents, descriptors),
+    ``points`` every valid endpoint (laser frame), ``angles`` / ``beams`` the beams for the ray
+    check (``inf`` = no return)."""
+
+    features: ScanFeatures
+    points: np.ndarray
+    angles: np.ndarray
+    beams: np.ndarray
 
 
 @dataclass
@@ -73,6 +103,7 @@ class Localization:
     candidates: list[Hypothesis] = field(default_factory=list)
     latency_ms: float = 0.0
     message: str = ''
+    stages: dict[str, float] = field(default_factory=dict)   # milliseconds per stage
 
     @property
     def ok(self) -> bool:
@@ -93,224 +124,431 @@ def vicinity_score(node_points: np.ndarray, query_points: np.ndarray, pose: Pose
     return float(np.sum(4.5 - d ** 2 / (2.0 * sigma_d ** 2)))
 
 
-def _same(a: Pose2, b: Pose2, xy: float = 0.05, yaw: float = np.deg2rad(2.0)) -> bool:
-    return np.hypot(a[0] - b[0], a[1] - b[1]) < xy and abs(wrap_angle(a[2] - b[2])) < yaw
+def distinct(a: Pose2, b: Pose2, xy: float, yaw: float) -> bool:
+    """Poses further apart than ``xy`` metres or ``yaw`` radians."""
+    return math.hypot(a[0] - b[0], a[1] - b[1]) > xy or abs(wrap_angle(a[2] - b[2])) > yaw
 
 
-def _distinct(a: Pose2, b: Pose2, cfg: LocalizerConfig) -> bool:
-    return (np.hypot(a[0] - b[0], a[1] - b[1]) > cfg.distinct_xy
-            or abs(wrap_angle(a[2] - b[2])) > cfg.distinct_yaw)
+def _same(a: Pose2, b: Pose2) -> bool:
+    return math.hypot(a[0] - b[0], a[1] - b[1]) < 0.05 and abs(wrap_angle(a[2] - b[2])) < 0.02
+
+
+class _Clock:
+    """Milliseconds per stage."""
+
+    def __init__(self) -> None:
+        self.t0 = self.last = time.perf_counter()
+        self.stages: dict[str, float] = {}
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.stages[name] = self.stages.get(name, 0.0) + (now - self.last) * 1e3
+        self.last = now
+
+    @property
+    def total_ms(self) -> float:
+        return (time.perf_counter() - self.t0) * 1e3
 
 
 class GlobalLocalizer:
     """Single-scan global localization against a :class:`MapIndex`.
 
-    Everything that depends on the map only (node KD-trees, the stacked node descriptors, the
-    ray caster, the wall surface model) is built here once; ``localize_*`` does per-scan work.
+    Everything that depends on the map only (the pooled node features, the correlative grids,
+    the wall surface model, the ray caster) is built here once; ``localize_*`` does per-scan work.
+    The stages are public so the tracker can reuse them on its own hypotheses.
     """
 
     def __init__(self, index: MapIndex, config: LocalizerConfig | None = None):
         self.index = index
-        self.config = config or LocalizerConfig()
+        self.config = cfg = config or LocalizerConfig()
         self.matcher_config = index.config.matcher
-        cfg = self.config
-        if cfg.paper_mode:   # section II.C as written: RANSAC + least squares, nothing more
-            self.fine_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
-                                                   retries=0, ransac_hypotheses=1)
-        else:
-            self.fine_config = dataclasses.replace(
-                self.matcher_config, icp=cfg.fine_icp, icp_iterations=cfg.fine_icp_iterations,
-                polish=cfg.fine_icp and cfg.fine_polish, retries=cfg.fine_retries,
-                ransac_hypotheses=cfg.fine_ransac_hypotheses)
         if len(index.features) == 0:
             raise ValueError('the map index has no nodes: nothing to localize against')
-        self._node_trees = [cKDTree(f.points) if len(f.points) else None for f in index.features]
-        desc = [f.descriptors for f in index.features]
-        self._desc_count = np.array([len(d) for d in desc])
-        self._desc_stack = (np.concatenate(desc) if self._desc_count.sum()
-                            else np.zeros((0, 1), np.float32))
-        self._desc_starts = np.minimum(np.concatenate(([0], np.cumsum(self._desc_count)[:-1])),
-                                       max(len(self._desc_stack) - 1, 0))
         m = index.map
-        self._occupied = m.occupied_mask(index.config.occupied_thresh)
-        self._caster = RayCaster(self._occupied, m.resolution, m.origin)
-        self._surface = SurfaceModel.from_occupancy(self._occupied, m.resolution, m.origin,
-                                                    self.config.surface_depth)
+        occupied = m.occupied_mask(index.config.occupied_thresh)
+        self.grid = CorrelativeGrid(m, occupied_thresh=index.config.occupied_thresh,
+                                    sigma=cfg.search_sigma, depth=cfg.search_depth,
+                                    max_range=cfg.max_cast_range)
+        self.surface = SurfaceModel.from_occupancy(occupied, m.resolution, m.origin,
+                                                   cfg.surface_depth)
+        self.caster = RayCaster(occupied, m.resolution, m.origin)
+        self.voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw)
+        self._map_directions = self.voting.orientation_histogram()
+        self._base_from_laser = inverse(cfg.laser_pose)
+        self._paper_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
+                                                 retries=0, ransac_hypotheses=1)
+        self._node_trees = ([cKDTree(f.points) if len(f.points) else None
+                             for f in index.features] if cfg.paper_mode else [])
+
+    # -- frames -------------------------------------------------------------------------------
+    def base_pose(self, laser_pose: Pose2) -> Pose2:
+        """The base pose in the map frame given the laser's."""
+        return compose(laser_pose, self._base_from_laser)
+
+    def laser_pose(self, base_pose: Pose2) -> Pose2:
+        """The laser pose in the map frame given the base's."""
+        return compose(base_pose, self.config.laser_pose)
 
     # -- entry points -----------------------------------------------------------------------
     def localize_scan(self, ranges, angle_min: float, angle_increment: float,
                       range_min: float = 0.0, range_max: float = float('inf')) -> Localization:
         """Localize a LaserScan given by its ranges and beam geometry."""
-        t0 = time.perf_counter()
+        clock = _Clock()
         try:
-            ranges = np.asarray(ranges, dtype=float).ravel()
-            points, idx = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
+            query = self.prepare_scan(ranges, angle_min, angle_increment, range_min, range_max)
         except ValueError as exc:
-            return self._failed(t0, f'bad scan: {exc}')
-        angles = angle_min + angle_increment * np.arange(len(ranges))
-        beams = np.where((ranges >= range_min) & (ranges <= range_max), ranges, np.inf)
-        beams[np.isnan(ranges)] = np.nan
-        keep = ~np.isnan(beams)
-        return self._localize(points, angles[keep], beams[keep], t0)
+            return self._failed(clock, f'bad scan: {exc}')
+        return self.localize_query(query, clock)
 
     def localize_points(self, points_xy: np.ndarray) -> Localization:
         """Localize laser-frame points given in scan order (no no-return information)."""
-        t0 = time.perf_counter()
+        clock = _Clock()
         try:
             pts = np.asarray(points_xy, dtype=float)
             if pts.ndim != 2 or pts.shape[1] != 2:
                 raise ValueError(f'expected (N, 2) points, got shape {pts.shape}')
+            pts = pts[np.all(np.isfinite(pts), axis=1)]
+            query = self.prepare_points(pts, np.arctan2(pts[:, 1], pts[:, 0]),
+                                        np.hypot(pts[:, 0], pts[:, 1]))
         except (TypeError, ValueError) as exc:
-            return self._failed(t0, f'bad points: {exc}')
-        pts = pts[np.all(np.isfinite(pts), axis=1)]
-        return self._localize(pts, np.arctan2(pts[:, 1], pts[:, 0]), np.hypot(pts[:, 0], pts[:, 1]), t0)
+            return self._failed(clock, f'bad points: {exc}')
+        return self.localize_query(query, clock)
+
+    def prepare_scan(self, ranges, angle_min: float, angle_increment: float,
+                     range_min: float = 0.0, range_max: float = float('inf')) -> Query:
+        """A :class:`Query` from LaserScan fields; ``ValueError`` for a malformed scan."""
+        ranges = np.asarray(ranges, dtype=float).ravel()
+        points, _ = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
+        angles = angle_min + angle_increment * np.arange(len(ranges))
+        beams = np.where((ranges >= range_min) & (ranges <= range_max), ranges, np.inf)
+        keep = ~np.isnan(ranges)
+        return self.prepare_points(points, angles[keep], beams[keep])
+
+    def prepare_points(self, points: np.ndarray, angles: np.ndarray, beams: np.ndarray) -> Query:
+        if len(points) < self.config.min_points:
+            raise ValueError(f'too few valid points ({len(points)} < {self.config.min_points})')
+        return Query(features=prepare_scan(points, self.matcher_config), points=points,
+                     angles=angles, beams=beams)
+
+    def localize_query(self, query: Query, clock: _Clock | None = None) -> Localization:
+        """The whole pipeline on a prepared query."""
+        clock = clock or _Clock()
+        clock.lap('prepare')
+        if self.config.paper_mode:
+            return self._paper(query, clock)
+        hyps = self.spectral_hypotheses(query, clock)
+        if self.config.search:
+            hyps += self.search_hypotheses(query, hyps)
+            clock.lap('search')
+        if not hyps:
+            return self._failed(clock, 'no pose hypothesis: neither the pose votes nor the '
+                                       'correlative search found a place that fits')
+        ranked = self._best_by_correlation(query, hyps)
+        refined = self.refine(query, ranked)
+        clock.lap('refine')
+        self.verify(query, self._worth_verifying(refined))
+        clock.lap('verify')
+        return self.decide(query, refined, clock,
+                           others=[h for h in ranked if not h.refined])
 
     # -- stages -----------------------------------------------------------------------------
-    def _failed(self, t0: float, message: str, candidates=None) -> Localization:
-        return Localization(status='failed', pose=None, candidates=candidates or [],
-                            latency_ms=(time.perf_counter() - t0) * 1e3, message=message)
-
-    def prefilter(self, query) -> np.ndarray:
-        """Nodes ordered by descriptor votes (each query point votes once per node)."""
-        n_nodes = len(self.index.features)
+    def spectral_hypotheses(self, query: Query, clock: _Clock | None = None) -> list[Hypothesis]:
+        """Pose voting, spectral coarse ranking of the peaks (eq. 5), RANSAC fine pose."""
         cfg = self.config
-        if (cfg.paper_mode or cfg.prefilter <= 0 or cfg.prefilter >= n_nodes
-                or len(self._desc_stack) == 0 or len(query.descriptors) == 0):
-            return np.arange(n_nodes)
-        # squared distance of every query descriptor to its nearest descriptor of every node
-        d2 = descriptor_distances(self._desc_stack, query.descriptors)          # (Q, total)
-        per_node = np.minimum.reduceat(d2, self._desc_starts, axis=1)           # (Q, nodes)
-        per_node[:, self._desc_count == 0] = np.inf
-        # each query point votes for its ``vote_neighbours`` best nodes
-        k = min(cfg.vote_neighbours, n_nodes)
-        best = np.argpartition(per_node, k - 1, axis=1)[:, :k]
-        votes = np.bincount(best.ravel(), minlength=n_nodes)
-        return np.argsort(-votes, kind='stable')[:cfg.prefilter]
-
-    def coarse(self, query, nodes: np.ndarray) -> list[Hypothesis]:
-        """Eq. (5)-(6) score of every node in ``nodes``; the ``top_n`` best (section IV.A)."""
+        feats = query.features
+        votes = self.voting.vote(feats)
+        peaks = self.voting.peaks(votes, cfg.vote_peaks)
+        if clock:
+            clock.lap('vote')
         scored = []
-        for k in nodes:
-            sol = spectral_solution(self.index.features[k], query, self.matcher_config)
-            s, _ = spectral_score(self.index.features[k], query, self.matcher_config, sol)
-            scored.append(Hypothesis(node=int(k), spectral=float(s), solution=sol))
-        scored.sort(key=lambda h: -h.spectral)
-        return scored[:self.config.top_n]
-
-    def fine(self, query, hyps: list[Hypothesis]) -> list[Hypothesis]:
-        """RANSAC pose per candidate and the vicinity score of eq. (10) (section IV.B)."""
-        base_from_laser = inverse(self.config.laser_pose)
+        for peak in peaks:
+            sel, energy = self._peak_spectral(feats, votes, peak.members)
+            if len(sel) >= 2:
+                scored.append((energy, peak.members[sel]))
+        scored.sort(key=lambda t: -t[0])
+        if clock:
+            clock.lap('coarse')
+        rng = np.random.default_rng(self.matcher_config.seed)
+        mc = self.matcher_config
         out = []
-        for h in hyps:
-            feats = self.index.features[h.node]
-            m = match_features(feats, query, self.fine_config, h.solution)
-            h.solution = None
-            if not m.ok:
+        for energy, members in scored[:cfg.top_n]:
+            qi, mj = votes.qi[members], votes.mj[members]
+            found = ransac_hypotheses(self.voting.points[mj], feats.points[qi],
+                                      mc.ransac_threshold, cfg.fine_ransac_iterations, rng,
+                                      mc.ransac_min_span)
+            if not found or found[0][1].sum() < mc.min_inliers:
                 continue
-            h.vicinity = vicinity_score(feats.points, query.points, m.pose, self.config.sigma_d,
-                                        self._node_trees[h.node])
-            h.laser_pose = compose(tuple(self.index.node_sensor_pose[h.node]), m.pose)
-            h.pose = compose(h.laser_pose, base_from_laser)
-            out.append(h)
+            pose, inliers = found[0]
+            node = int(np.bincount(self.voting.nodes[mj[inliers]]).argmax())
+            out.append(Hypothesis(source='spectral', initial_pose=pose, node=node,
+                                  spectral=float(energy)))
+        if clock:
+            clock.lap('fine')
         return out
 
-    def _refine_unique(self, hyps: list[Hypothesis], points: np.ndarray) -> list[Hypothesis]:
-        """Refine each distinct pose once on the wall surface (batched); drop duplicates."""
+    def _peak_spectral(self, feats: ScanFeatures, votes: Votes, members: np.ndarray):
+        """Spectral matching (eqs. 2-6) of a peak's correspondences: (selection, eq. 5 score)."""
+        mc = self.matcher_config
+        ui, li = np.unique(votes.qi[members], return_inverse=True)
+        uj, lj = np.unique(votes.mj[members], return_inverse=True)
+        qp, qt = feats.points[ui], feats.tangents[ui]
+        mp = self.voting.points[uj]
+        mt = np.column_stack((np.cos(self.voting.angles[uj]), np.sin(self.voting.angles[uj])))
+        pairs = np.column_stack((lj.ravel(), li.ravel()))
+        g = affinity_matrix(distance_table(mp), angle_table(mt), distance_table(qp), angle_table(qt),
+                            pairs, mc.weights, mc.max_dist_deform, mc.max_angle_deform)
+        x = leading_eigenvector(g, mc.power_iterations, mc.power_tol)
+        sel = binarize(x, pairs, mc.binarize_min_ratio)
+        return sel, matching_score(g, sel)
+
+    def search_hypotheses(self, query: Query, seeds: list[Hypothesis],
+                          window: tuple[float, float, float, float] | None = None,
+                          yaws: np.ndarray | None = None) -> list[Hypothesis]:
+        """Correlative branch and bound over the map (or ``window``) at the given ``yaws``, by
+        default the yaws of the ``search_seeds`` best seeds and their flips, +- ``search_spread``."""
         cfg = self.config
-        todo: list[Hypothesis] = []
-        for h in sorted(hyps, key=lambda h: -h.spectral):
-            if not any(_same(h.laser_pose, o.laser_pose) for o in todo):
-                todo.append(h)
+        pts = _evenly(query.features.points, cfg.search_points)
+        if yaws is None:
+            yaws = self._seed_yaws(query, seeds)
+            if len(yaws) == 0:
+                return []
+        found = self.grid.search(pts, yaws=yaws, window=window, min_score=cfg.search_min_score,
+                                 ratio=cfg.search_ratio, budget_s=cfg.search_budget)
+        out: list[Hypothesis] = []
+        for pose, score in zip(found.poses, found.scores):
+            pose = tuple(float(v) for v in pose)
+            if any(not distinct(pose, h.initial_pose, cfg.vote_bin_xy, cfg.search_step * 3)
+                   for h in out):
+                continue
+            out.append(Hypothesis(source='search', initial_pose=pose, correlative=float(score)))
+            if len(out) >= cfg.search_keep:
+                break
+        return out
+
+    def _seed_yaws(self, query: Query, seeds: list[Hypothesis]) -> np.ndarray:
+        """Yaws to search: the orientations of the best hypotheses by correlative score, up to
+        ``search_seeds`` distinct ones (modulo a half turn), each with its flip, each
+        +- ``search_spread``."""
+        cfg = self.config
+        centres: list[float] = []
+        for h in self._best_by_correlation(query, seeds):
+            yaw = h.initial_pose[2]
+            if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * cfg.search_step for c in centres):
+                centres.append(yaw)
+            if len(centres) >= cfg.search_seeds:
+                break
+        feats = query.features
+        for yaw in alignment_yaws(self._map_directions, np.arctan2(feats.tangents[:, 1],
+                                                                    feats.tangents[:, 0]),
+                                  None, cfg.search_alignments):
+            if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * cfg.search_step for c in centres):
+                centres.append(float(yaw))
+        if not centres:
+            return np.zeros(0)
+        base = np.concatenate((centres, np.asarray(centres) + math.pi))
+        n = int(round(cfg.search_spread / cfg.search_step))
+        return np.concatenate([base + cfg.search_step * k for k in range(-n, n + 1)])
+
+    def _best_by_correlation(self, query: Query, hyps: list[Hypothesis]) -> list[Hypothesis]:
+        """Hypotheses by their correlative score, best first, duplicates dropped."""
+        if not hyps:
+            return []
+        scores = self.grid.score_poses(query.features.points,
+                                       np.array([h.initial_pose for h in hyps]))
+        for h, s in zip(hyps, scores):
+            h.correlative = float(s)
+        out: list[Hypothesis] = []
+        for h in sorted(hyps, key=lambda h: -h.correlative):
+            if not any(_same(h.initial_pose, o.initial_pose) for o in out):
+                out.append(h)
+        return out
+
+    def refine(self, query: Query, hyps: list[Hypothesis],
+               limit: int | None = None) -> list[Hypothesis]:
+        """Refine the ``refine_hypotheses`` first hypotheses on the wall surface (batched);
+        merge those that meet; best explained first."""
+        cfg = self.config
+        todo = hyps[:cfg.refine_hypotheses if limit is None else limit]
         if not todo:
             return []
-        results = refine_poses(self._surface, points, np.array([h.laser_pose for h in todo]),
-                               iterations=cfg.refine_iterations if cfg.refine else 0,
-                               truncate=cfg.refine_radius, inlier_distance=cfg.inlier_distance)
-        base_from_laser = inverse(cfg.laser_pose)
-        out: list[Hypothesis] = []
+        results = refine_poses(self.surface, query.features.points,
+                               np.array([h.initial_pose for h in todo]),
+                               iterations=cfg.refine_iterations, truncate=cfg.refine_radius,
+                               estimate_depth=cfg.estimate_depth,
+                               depth_prior=cfg.surface_depth_std, score_sigma=cfg.score_sigma)
         for h, r in zip(todo, results):
-            h.laser_pose, h.cost = r.pose, r.cost
-            h.covariance = self._base_covariance(r.covariance, h.laser_pose)
-            h.pose = compose(h.laser_pose, base_from_laser)
+            h.laser_pose, h.explained, h.depth, h.refined = r.pose, r.explained, r.depth, True
+            h.score = h.explained
+            h.pose = self.base_pose(h.laser_pose)
+            h.covariance = self.report_covariance(r.covariance, h.laser_pose)
+        out: list[Hypothesis] = []
+        for h in sorted(todo, key=lambda h: -h.explained):
             if not any(_same(h.laser_pose, o.laser_pose) for o in out):
                 out.append(h)
         return out
 
-    def beam_check(self, hyps: list[Hypothesis], angles: np.ndarray, beams: np.ndarray) -> None:
+    def _worth_verifying(self, refined: list[Hypothesis]) -> list[Hypothesis]:
+        """The refined hypotheses (best explained first) within ``verify_margin`` of the best
+        explained fraction, at least ``verify_hypotheses`` of them: any of these could win or be a
+        rival once the beams that see through walls are counted."""
+        cfg = self.config
+        if not refined:
+            return []
+        top = refined[0].explained
+        return [h for k, h in enumerate(refined)
+                if k < cfg.verify_hypotheses or h.explained >= top - cfg.verify_margin]
+
+    def verify(self, query: Query, hyps: list[Hypothesis]) -> None:
         """Ray-cast the query's beams from every hypothesis at once; compare with the scan."""
         if not hyps:
             return
         cfg = self.config
-        expected = self._caster.cast(np.array([h.laser_pose for h in hyps]), angles,
-                                     cfg.max_cast_range)
-        measured = np.where(beams > cfg.max_cast_range, np.inf, beams)
+        pick = np.unique(np.linspace(0, len(query.angles) - 1, cfg.verify_beams).astype(int))
+        expected = self.caster.cast(np.array([h.laser_pose for h in hyps]), query.angles[pick],
+                                    cfg.max_cast_range)
+        measured = np.where(query.beams[pick] > cfg.max_cast_range, np.inf, query.beams[pick])
         for h, e in zip(hyps, expected):
             h.check = check_beams(measured, e, tol=cfg.beam_tolerance)
-            h.fit = (h.cost / cfg.inlier_distance ** 2
-                     + cfg.contradiction_weight * h.check.contradicting)
+            h.score = h.explained - cfg.contradiction_weight * h.check.contradicting
 
-    @staticmethod
-    def _position_std(h: Hypothesis) -> float:
-        """Standard deviation (m) of the position along its least constrained direction."""
-        if h.covariance is None:
-            return float('inf')
-        return float(np.sqrt(max(np.linalg.eigvalsh(h.covariance[:2, :2]).max(), 0.0)))
+    def polish(self, query: Query, h: Hypothesis) -> None:
+        """A last Gauss-Newton run of one hypothesis on every endpoint of the scan."""
+        cfg = self.config
+        if cfg.polish_iterations <= 0:
+            return
+        r = refine_poses(self.surface, query.points, np.array([h.laser_pose]),
+                         iterations=cfg.polish_iterations,
+                         truncate=(cfg.refine_radius[1], cfg.refine_radius[1]),
+                         estimate_depth=cfg.estimate_depth, depth_prior=cfg.surface_depth_std,
+                         score_sigma=cfg.score_sigma)[0]
+        h.laser_pose, h.depth = r.pose, r.depth
+        h.pose = self.base_pose(h.laser_pose)
+        h.covariance = self.report_covariance(r.covariance, h.laser_pose)
 
-    def _base_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
-        """Propagate the laser-pose covariance to the base pose (first order)."""
-        lx, ly, _ = inverse(self.config.laser_pose)
+    def decide(self, query: Query, hyps: list[Hypothesis], clock: _Clock | None = None,
+               others: list[Hypothesis] = ()) -> Localization:
+        """The answer from refined and verified hypotheses: the best scoring one, polished on
+        every endpoint, with the status of :func:`verdict`.
+
+        ``candidates`` of the answer: the verified hypotheses by score, then the refined ones,
+        then ``others`` (not refined), for diagnosis (``bench localize`` reads them).
+        """
+        clock = clock or _Clock()
+        limit = self.config.max_contradicting
+        checked = sorted((h for h in hyps if h.check is not None),
+                         key=lambda h: (h.contradicting > limit, -h.score))
+        if not checked:
+            return self._failed(clock, 'no verified hypothesis')
+        best = checked[0]
+        self.polish(query, best)
+        status, message, cov = verdict(checked, self.config)
+        return Localization(status=status, pose=best.pose, covariance=cov, node=best.node,
+                            score=best.score, message=message, latency_ms=clock.total_ms,
+                            stages=clock.stages,
+                            candidates=checked + [h for h in hyps if h.check is None]
+                            + list(others))
+
+    def report_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
+        """The Gauss-Newton laser covariance, scaled and floored, propagated to the base."""
+        cfg = self.config
+        cov = cfg.covariance_scale * np.asarray(cov_laser, float) + np.diag(
+            [cfg.min_position_std ** 2, cfg.min_position_std ** 2, cfg.min_yaw_std ** 2])
+        lx, ly, _ = self._base_from_laser
         off = apply((0.0, 0.0, laser_pose[2]), (lx, ly))[0]      # laser -> base, in the map
         jac = np.array([[1.0, 0.0, -off[1]], [0.0, 1.0, off[0]], [0.0, 0.0, 1.0]])
-        return jac @ cov_laser @ jac.T
+        return jac @ cov @ jac.T
 
-    def _localize(self, points: np.ndarray, angles: np.ndarray, beams: np.ndarray,
-                  t0: float) -> Localization:
+    # -- the paper's pipeline -----------------------------------------------------------------
+    def _paper(self, query: Query, clock: _Clock) -> Localization:
+        """Section IV as written: all nodes ranked by spectral score, RANSAC + LS on the top_n,
+        the largest vicinity score (eq. 10) wins."""
         cfg = self.config
-        if len(points) < cfg.min_points:
-            return self._failed(t0, f'too few valid points ({len(points)} < {cfg.min_points})')
-        try:
-            query = prepare_scan(points, self.matcher_config)
-        except ValueError as exc:
-            return self._failed(t0, f'bad scan: {exc}')
-        hyps = self.fine(query, self.coarse(query, self.prefilter(query)))
+        feats = query.features
+        scored = []
+        for k, node in enumerate(self.index.features):
+            sol = spectral_solution(node, feats, self.matcher_config)
+            s, _ = spectral_score(node, feats, self.matcher_config, sol)
+            scored.append((float(s), k, sol))
+        scored.sort(key=lambda t: -t[0])
+        clock.lap('coarse')
+        hyps = []
+        for s, k, sol in scored[:cfg.top_n]:
+            node = self.index.features[k]
+            m = match_features(node, feats, self._paper_config, sol)
+            if not m.ok:
+                continue
+            laser = compose(tuple(self.index.node_sensor_pose[k]), m.pose)
+            hyps.append(Hypothesis(
+                source='paper', initial_pose=laser, node=k, spectral=s, laser_pose=laser,
+                pose=compose(laser, self._base_from_laser),
+                vicinity=vicinity_score(node.points, feats.points, m.pose, cfg.sigma_d,
+                                        self._node_trees[k])))
+        clock.lap('fine')
         if not hyps:
-            return self._failed(t0, 'no candidate node gave a consistent match')
-        if cfg.paper_mode:
-            best = max(hyps, key=lambda h: h.vicinity)
-            return Localization(status='ok', pose=best.pose, node=best.node, score=best.vicinity,
-                                candidates=hyps, latency_ms=(time.perf_counter() - t0) * 1e3,
-                                message='paper mode: largest vicinity score')
-        hyps = self._refine_unique(hyps, points)
-        self.beam_check(hyps, angles, beams)
-        hyps.sort(key=lambda h: (not h.plausible(cfg), h.fit))
+            return self._failed(clock, 'no candidate node gave a consistent match')
+        hyps.sort(key=lambda h: -h.vicinity)
         best = hyps[0]
-        ms = (time.perf_counter() - t0) * 1e3
-        if not best.plausible(cfg):      # the best-fitting pose is kept only for diagnosis
-            return Localization(status='failed', pose=best.pose, node=best.node,
-                                score=best.score, candidates=hyps, latency_ms=ms,
-                                message=(f'no hypothesis agrees with the map (best fit: agree '
-                                         f'{best.check.consistent:.0%}, through walls '
-                                         f'{best.check.contradicting:.0%})'))
-        if best.fit > cfg.max_fit:
-            return Localization(status='failed', pose=best.pose, node=best.node,
-                                score=best.score, candidates=hyps, latency_ms=ms,
-                                message=(f'the best pose explains too little of the scan (fit '
-                                         f'{best.fit:.2f} > {cfg.max_fit})'))
-        rivals = [h for h in hyps[1:] if h.plausible(cfg) and _distinct(h.pose, best.pose, cfg)
-                  and h.fit <= best.fit * cfg.ambiguity_ratio]
-        cov = best.covariance
-        if rivals:
-            status = 'ambiguous'
-            msg = f'{len(rivals) + 1} distinct poses fit about equally well'
-            spread = np.array([h.pose for h in rivals + [best]])
-            cov = cov + np.diag([*np.var(spread[:, :2], axis=0), np.pi ** 2 / 3.0])
-        elif self._position_std(best) > cfg.max_position_std:
-            status = 'ambiguous'
-            msg = (f'degenerate geometry (e.g. a corridor): position std '
-                   f'{self._position_std(best):.2f} m along the weakest direction')
-        else:
-            status = 'ok'
-            msg = (f'agree {best.check.consistent:.0%}, through walls '
-                   f'{best.check.contradicting:.0%}, fit {best.fit:.3f}')
-        return Localization(status=status, pose=best.pose, covariance=cov, node=best.node,
-                            score=best.score, candidates=hyps, latency_ms=ms, message=msg)
+        return Localization(status='ok', pose=best.pose, node=best.node, score=best.vicinity,
+                            candidates=hyps, latency_ms=clock.total_ms, stages=clock.stages,
+                            message='paper mode: largest vicinity score')
+
+    @staticmethod
+    def _failed(clock: _Clock, message: str) -> Localization:
+        return Localization(status='failed', pose=None, latency_ms=clock.total_ms,
+                            message=message, stages=clock.stages)
+
+
+def _evenly(points: np.ndarray, count: int) -> np.ndarray:
+    """At most ``count`` of ``points``, evenly spaced in their order."""
+    if len(points) <= count:
+        return points
+    return points[np.linspace(0, len(points) - 1, count).astype(int)]
+
+
+def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig) -> tuple[str, str, np.ndarray]:
+    """``(status, message, covariance)`` for verified hypotheses, plausible ones first, then by
+    score.
+
+    ``failed`` when even the best has more than ``max_contradicting`` of its beams seeing through
+    walls, or explains too little of the scan (score below ``min_score``);
+    ``ambiguous`` when a distinct pose scores within ``ambiguity_margin`` of it (the covariance
+    then spans them) or when its position is undetermined beyond ``max_position_std`` along some
+    direction (2 sigma beyond the 0.5 m success tolerance: a bare corridor); else ``ok``.
+    """
+    best = ranked[0]
+    cov = best.covariance if best.covariance is not None else np.diag([1e3, 1e3, 1e3])
+    if best.contradicting > cfg.max_contradicting:
+        return 'failed', (f'no pose agrees with the map: at the best, {best.contradicting:.0%} of '
+                          f'the beams see through walls (> {cfg.max_contradicting:.0%})'), \
+            _inflated(cov)
+    if best.score < cfg.min_score:
+        return 'failed', (f'the best pose explains too little of the scan (explained '
+                          f'{best.explained:.0%}, through walls {best.contradicting:.0%}: '
+                          f'score {best.score:.2f} < {cfg.min_score})'), _inflated(cov)
+    rivals = [h for h in ranked[1:]
+              if distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)
+              and h.score >= best.score - cfg.ambiguity_margin]
+    if rivals:
+        spread = np.array([h.pose for h in rivals + [best]])
+        cov = cov + np.diag([*np.var(spread[:, :2], axis=0), np.pi ** 2 / 3.0])
+        return 'ambiguous', (f'{len(rivals) + 1} distinct poses fit about equally well '
+                             f'(scores {best.score:.2f} and '
+                             f'{max(h.score for h in rivals):.2f})'), cov
+    std = position_std(cov)
+    if std > cfg.max_position_std:
+        return 'ambiguous', (f'degenerate geometry (e.g. a corridor): position std {std:.2f} m '
+                             f'along the weakest direction'), cov
+    return 'ok', (f'explained {best.explained:.0%}, through walls {best.contradicting:.0%}, '
+                  f'position std {std * 1e3:.0f} mm'), cov
+
+
+def position_std(cov: np.ndarray | None) -> float:
+    """Standard deviation (m) of the position along its least constrained direction."""
+    if cov is None:
+        return float('inf')
+    return float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(cov)[:2, :2]).max(), 0.0)))
+
+
+def _inflated(cov: np.ndarray) -> np.ndarray:
+    """The covariance of a rejected pose: it says nothing about where the robot is."""
+    return cov + np.diag([1e2, 1e2, np.pi ** 2])

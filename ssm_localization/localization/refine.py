@@ -5,12 +5,13 @@ by the virtual scan's sampling. Here the winning hypotheses are refined by Gauss
 signed distance of the scan endpoints to the map's wall surface (``verify.py`` then checks them
 by ray casting).
 
-Where the wall surface lies is an explicit model choice (``surface_depth``, in cells):
-- ``0.0``: at the boundary of the occupied cells. Right for scans ray-cast on the same grid
-  (the paper's Table 1 simulation stops at the first occupied cell's boundary).
-- ``0.5``: through the centres of the occupied cells. Right for real scans on maps built from real
-  scans, where beams end anywhere inside a wall cell and the cell was marked where beams ended.
-Using the wrong one costs about half a cell of accuracy.
+Where the wall surface lies inside the occupied cells depends on how the map was made: at the
+boundary of the occupied cells for scans ray-cast on the same grid (the paper's Table 1 simulation
+stops at the first occupied cell's boundary), about half a cell deeper for real scans on maps
+built from real scans (beams end anywhere inside a wall cell). ``refine_poses`` can estimate that
+offset from the scan itself (``estimate_depth``): one more unknown, the same for every point, with
+a weak prior, observable whenever walls are seen from more than one side. Guessing it wrong would
+cost about half a cell of accuracy.
 """
 from __future__ import annotations
 
@@ -22,23 +23,24 @@ from scipy import ndimage
 from ..transforms import Pose2, rotation, wrap_angle
 
 
-_NEIGHBOURHOOD = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
+#: lattice points per cell side of the precomputed signed distance
+SUBDIVISION = 2
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SurfaceModel:
-    """Exact signed distance to the boundary of occupied cells, shifted by ``depth`` metres.
+    """Signed distance to the boundary of occupied cells, shifted by ``depth`` metres.
 
-    For every cell the nearest occupied cell (for free cells) or nearest non-occupied cell (for
-    occupied cells) is precomputed once per map (EDT indices); a query then costs one table look-up
-    and a point-to-box distance per point, with an exact gradient.
+    The exact distance is precomputed on a lattice of half-cell spacing (``lattice``, float32, in
+    cells): the closest point of a union of lattice-aligned boxes to a lattice point is itself a
+    lattice point, so two Euclidean distance transforms give it exactly. Between lattice points it
+    is interpolated bilinearly (exact along straight axis-aligned walls, within a few hundredths of
+    a cell near corners), which makes a query four table look-ups per point.
     """
 
     origin: Pose2
     resolution: float
-    occupied: np.ndarray        # (H, W) bool
-    nearest_occ: np.ndarray     # (2, H, W) int32 row/col of the nearest occupied cell
-    nearest_free: np.ndarray    # (2, H, W) int32 row/col of the nearest non-occupied cell
+    lattice: np.ndarray         # (2H + 1, 2W + 1) float32 signed distance in cells
     depth: float                # metres behind the occupied-cell boundary where the surface lies
 
     @classmethod
@@ -47,14 +49,16 @@ class SurfaceModel:
         occupied = np.asarray(occupied, dtype=bool)
         if not occupied.any():
             raise ValueError('map has no occupied cells: nothing to refine against')
-        _, i_occ = ndimage.distance_transform_edt(~occupied, return_indices=True)
-        if occupied.all():
-            i_free = np.zeros_like(i_occ)
-        else:
-            _, i_free = ndimage.distance_transform_edt(occupied, return_indices=True)
+        fine = np.repeat(np.repeat(occupied, SUBDIVISION, axis=0), SUBDIVISION, axis=1)
+        # a lattice point touches the occupied (free) region when one of its 4 sub-cells does
+        occ_v = _touches(fine)
+        free_v = _touches(~fine)
+        outside = ndimage.distance_transform_edt(~occ_v)
+        inside = (ndimage.distance_transform_edt(~free_v) if free_v.any()
+                  else np.full(occ_v.shape, float(max(occ_v.shape))))
+        sdf = np.where(occ_v & free_v, 0.0, np.where(occ_v, -inside, outside)) / SUBDIVISION
         return cls(origin=tuple(float(v) for v in origin), resolution=float(resolution),
-                   occupied=occupied, nearest_occ=i_occ.astype(np.int32),
-                   nearest_free=i_free.astype(np.int32),
+                   lattice=sdf.astype(np.float32),
                    depth=float(surface_depth_cells) * float(resolution))
 
     def signed_distance(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -64,36 +68,34 @@ class SurfaceModel:
         """
         ox, oy, oyaw = self.origin
         rot = rotation(oyaw)
-        g = (np.asarray(pts, float) - (ox, oy)) @ rot / self.resolution  # grid units, (col, row)
-        h, w = self.occupied.shape
-        col = np.floor(g[:, 0]).astype(np.int64)
-        row = np.floor(g[:, 1]).astype(np.int64)
-        valid = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        g = (np.asarray(pts, float).reshape(-1, 2) - (ox, oy)) @ rot * (SUBDIVISION
+                                                                         / self.resolution)
+        h, w = self.lattice.shape
+        j0 = np.floor(g[:, 0]).astype(np.int64)
+        i0 = np.floor(g[:, 1]).astype(np.int64)
+        valid = (j0 >= 0) & (j0 < w - 1) & (i0 >= 0) & (i0 < h - 1)
         s = np.zeros(len(g))
         grad = np.zeros((len(g), 2))
         if not valid.any():
             return s, grad, valid
-        r, c, gv = row[valid], col[valid], g[valid]
-        inside = self.occupied[r, c]
-        # The nearest box is the nearest-centre cell of this cell or of one of its 8 neighbours.
-        best = np.full(len(gv), np.inf)
-        diff = np.zeros_like(gv)
-        for dr, dc in _NEIGHBOURHOOD:
-            rr, cc = np.clip(r + dr, 0, h - 1), np.clip(c + dc, 0, w - 1)
-            near = np.where(inside, self.nearest_free[:, rr, cc], self.nearest_occ[:, rr, cc])
-            box_lo = np.column_stack((near[1], near[0])).astype(float)
-            d = gv - np.clip(gv, box_lo, box_lo + 1.0)   # from the box's closest point to gv
-            dd = np.hypot(d[:, 0], d[:, 1])
-            better = dd < best
-            best = np.where(better, dd, best)
-            diff[better] = d[better]
-        dist = best
-        unit = np.divide(diff, dist[:, None], out=np.zeros_like(diff), where=dist[:, None] > 0)
-        sign = np.where(inside, -1.0, 1.0)
-        # inside a wall the distance is to the nearest free box and grows away from it
-        s[valid] = sign * dist * self.resolution + self.depth
-        grad[valid] = (sign[:, None] * unit) @ rot.T
+        i, j = i0[valid], j0[valid]
+        fx, fy = g[valid, 0] - j, g[valid, 1] - i
+        flat = self.lattice.ravel()
+        k = i * w + j
+        a, b, c, d = flat[k], flat[k + 1], flat[k + w], flat[k + w + 1]
+        bottom = a + fx * (b - a)
+        top = c + fx * (d - c)
+        s[valid] = (bottom + fy * (top - bottom)) * self.resolution + self.depth
+        dcol = (b - a) + fy * ((d - c) - (b - a))
+        drow = top - bottom
+        grad[valid] = np.column_stack((dcol, drow)) * SUBDIVISION @ rot.T
         return s, grad, valid
+
+
+def _touches(mask: np.ndarray) -> np.ndarray:
+    """(H + 1, W + 1) lattice points with at least one of their four cells in ``mask``."""
+    pad = np.pad(mask, 1, constant_values=False)
+    return pad[:-1, :-1] | pad[:-1, 1:] | pad[1:, :-1] | pad[1:, 1:]
 
 
 @dataclass(frozen=True)
@@ -104,6 +106,8 @@ class RefineResult:
     inlier_fraction: float      # endpoints within ``inlier_distance`` of the surface
     cost: float                 # mean truncated squared residual min(r^2, d_in^2) of all endpoints
     iterations: int
+    depth: float = 0.0          # wall surface behind the occupied-cell boundary, metres
+    explained: float = 0.0      # mean of exp(-r^2 / 2 sigma^2): the fraction of the scan explained
 
 
 def refine_pose(surface: SurfaceModel, points: np.ndarray, pose: Pose2, **kwargs) -> RefineResult:
@@ -114,18 +118,28 @@ def refine_pose(surface: SurfaceModel, points: np.ndarray, pose: Pose2, **kwargs
 def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *,
                  iterations: int = 12, huber: float = 0.1,
                  truncate: tuple[float, float] = (0.3, 0.1), inlier_distance: float = 0.1,
-                 min_sigma: float = 0.005) -> list[RefineResult]:
-    """Gauss-Newton on ``sum rho(sdf(R p + t))`` for several laser poses at once (batched).
+                 min_sigma: float = 0.005, estimate_depth: bool = False,
+                 depth_prior: float = 0.25, score_sigma: float = 0.05) -> list[RefineResult]:
+    """Gauss-Newton on ``sum rho(sdf(R p + t) + delta)`` for several laser poses at once (batched).
 
     The truncation radius shrinks from ``truncate[0]`` to ``truncate[1]`` so clutter and unmapped
-    objects drop out; Huber weights soften the rest. The covariance is ``sigma^2 (J^T W J)^-1``.
-    All hypotheses share one signed-distance look-up per iteration, which is what makes refining
-    every candidate of the fine stage affordable.
+    objects drop out; Huber weights soften the rest. The covariance is ``sigma^2 (J^T W J)^-1``
+    (the pose block). All hypotheses share one signed-distance look-up per iteration, which is what
+    makes refining many hypotheses affordable.
+    ``estimate_depth``: ``delta``, the wall surface's offset behind the surface model's own depth,
+    is a fourth unknown per pose, starting at 0, with a Gaussian prior of ``depth_prior`` cells
+    and kept within the occupied cell; otherwise it stays 0. ``explained`` in each result is
+    ``mean exp(-r^2 / 2 score_sigma^2)`` over all points at the final pose.
     """
     pts = np.asarray(points, float).reshape(-1, 2)
     x = np.array(poses, float).reshape(-1, 3)
     n_h, n_p = len(x), len(pts)
-    jtj = np.tile(np.eye(3), (n_h, 1, 1))
+    dim = 4 if estimate_depth else 3
+    res = surface.resolution
+    lo, hi = -surface.depth, res - surface.depth           # the surface stays inside its cell
+    delta = np.zeros(n_h)
+    prior = (1.0 / (depth_prior * res)) ** 2 if estimate_depth else 0.0
+    jtj = np.tile(np.eye(dim), (n_h, 1, 1))
     sigma2 = np.full(n_h, min_sigma ** 2)
     active = np.ones(n_h, dtype=bool)
     done_iters = np.zeros(n_h, dtype=int)
@@ -135,34 +149,44 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
         trunc = truncate[0] + (truncate[1] - truncate[0]) * min(1.0, (it - 1) / max(iterations // 2, 1))
         world, rel = _transform(x, pts)
         r, g, valid = surface.signed_distance(world.reshape(-1, 2))
-        r, g, valid = r.reshape(n_h, n_p), g.reshape(n_h, n_p, 2), valid.reshape(n_h, n_p)
+        r = r.reshape(n_h, n_p) + delta[:, None]
+        g, valid = g.reshape(n_h, n_p, 2), valid.reshape(n_h, n_p)
         use = valid & (np.abs(r) < trunc)
         absr = np.abs(r)
         wts = np.where(use, np.where(absr <= huber, 1.0, huber / np.maximum(absr, 1e-12)), 0.0)
-        jac = np.concatenate((g, (g[..., 1] * rel[..., 0] - g[..., 0] * rel[..., 1])[..., None]),
-                             axis=2)
+        cols = [g, (g[..., 1] * rel[..., 0] - g[..., 0] * rel[..., 1])[..., None]]
+        if estimate_depth:
+            cols.append(np.ones((n_h, n_p, 1)))
+        jac = np.concatenate(cols, axis=2)
         a = np.einsum('hn,hni,hnj->hij', wts, jac, jac)
         b = np.einsum('hn,hni,hn->hi', wts, jac, r)
+        if estimate_depth:      # prior on delta, in units of the current residual variance
+            a[:, 3, 3] += prior * sigma2
+            b[:, 3] += prior * sigma2 * delta
         enough = use.sum(axis=1) >= 3
-        step = np.zeros((n_h, 3))
+        step = np.zeros((n_h, dim))
         ok = active & enough
         if ok.any():
-            step[ok] = -np.linalg.solve(a[ok] + 1e-9 * np.eye(3), b[ok][..., None])[..., 0]
+            step[ok] = -np.linalg.solve(a[ok] + 1e-9 * np.eye(dim), b[ok][..., None])[..., 0]
             jtj[ok] = a[ok]
             sigma2[ok] = np.maximum(np.sum(wts[ok] * r[ok] ** 2, axis=1)
-                                    / np.maximum(use[ok].sum(axis=1) - 3, 1), min_sigma ** 2)
-        x += step
+                                    / np.maximum(use[ok].sum(axis=1) - dim, 1), min_sigma ** 2)
+        x += step[:, :3]
         x[:, 2] = wrap_angle(x[:, 2])
+        if estimate_depth:
+            delta = np.clip(delta + step[:, 3], lo, hi)
         done_iters[ok] = it
         active &= enough & ((np.hypot(step[:, 0], step[:, 1]) >= 1e-5) | (np.abs(step[:, 2]) >= 1e-6))
     world, _ = _transform(x, pts)
     r, _, valid = surface.signed_distance(world.reshape(-1, 2))
-    r, valid = r.reshape(n_h, n_p), valid.reshape(n_h, n_p)
+    r = r.reshape(n_h, n_p) + delta[:, None]
+    valid = valid.reshape(n_h, n_p)
     inl = valid & (np.abs(r) < inlier_distance)
+    explained = np.where(valid, np.exp(-0.5 * (r / score_sigma) ** 2), 0.0)
     out = []
     for k in range(n_h):
         try:
-            cov = sigma2[k] * np.linalg.inv(jtj[k])
+            cov = sigma2[k] * np.linalg.inv(jtj[k])[:3, :3]
         except np.linalg.LinAlgError:
             cov = np.diag([1e3, 1e3, 1e3])
         rk, ik = r[k], inl[k]
@@ -171,7 +195,8 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
             rms=float(np.sqrt(np.mean(rk[ik] ** 2))) if ik.any() else float('inf'),
             inlier_fraction=float(ik.mean()) if n_p else 0.0,
             cost=float(np.mean(np.where(ik, rk ** 2, inlier_distance ** 2))) if n_p else float('inf'),
-            iterations=int(done_iters[k])))
+            iterations=int(done_iters[k]), depth=float(surface.depth + delta[k]),
+            explained=float(explained[k].mean()) if n_p else 0.0))
     return out
 
 

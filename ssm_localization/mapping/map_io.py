@@ -33,6 +33,16 @@ def _fits_float32(v: float) -> bool:
     return math.isfinite(v) and abs(v) <= FLOAT32_MAX
 
 
+def canonical(v: float) -> float:
+    """The shortest decimal that rounds to the same float32 as ``v``.
+
+    nav_msgs/OccupancyGrid carries the resolution and origin as float32, a map YAML file as
+    decimals: ``0.05`` arrives as ``0.05000000074505806`` over the wire. Every map is stored with
+    the canonical value, so the same map gives the same numbers, whichever way it came.
+    """
+    return float(np.format_float_positional(np.float32(v), unique=True, trim='0'))
+
+
 @dataclass(frozen=True, eq=False)
 class OccupancyMap:
     """An occupancy grid (see module docstring for the cell convention)."""
@@ -60,8 +70,8 @@ class OccupancyMap:
             raise ValueError(f'OccupancyMap.origin: expected finite (x, y, yaw) within float32 '
                              f'range, got {echo(self.origin)}')
         object.__setattr__(self, 'data', np.ascontiguousarray(data, dtype=np.int8))
-        object.__setattr__(self, 'resolution', res)
-        object.__setattr__(self, 'origin', origin)
+        object.__setattr__(self, 'resolution', canonical(res))
+        object.__setattr__(self, 'origin', tuple(canonical(v) for v in origin))
         object.__setattr__(self, 'frame_id', str(self.frame_id))
 
     @property

@@ -131,10 +131,10 @@ def _thin(mask: np.ndarray, ring: np.ndarray) -> None:
             break
 
 
-def _graph(idx: np.ndarray, mask: np.ndarray, w: int, res: float):
+def _graph(idx: np.ndarray, mask: np.ndarray, w: int):
     """Sparse symmetric 8-neighbour graph over the sorted flat pixel indices ``idx``.
 
-    Returns the csr graph (weights in metres) and each undirected edge once (``er``, ``ec``).
+    Returns the csr graph (weights in cells) and each undirected edge once (``er``, ``ec``).
     """
     rows, cols, wts = [], [], []
     # A diagonal step is redundant (and would short-circuit junctions) when the two pixels
@@ -147,7 +147,7 @@ def _graph(idx: np.ndarray, mask: np.ndarray, w: int, res: float):
             ok &= ~mask[idx + v]
         rows.append(np.flatnonzero(ok))
         cols.append(np.searchsorted(idx, nb[ok]))
-        wts.append(np.full(int(ok.sum()), length * res))
+        wts.append(np.full(int(ok.sum()), length))
     r, c, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(wts)
     n = len(idx)
     g = coo_matrix((np.concatenate((v, v)), (np.concatenate((r, c)), np.concatenate((c, r)))),
@@ -158,7 +158,7 @@ def _graph(idx: np.ndarray, mask: np.ndarray, w: int, res: float):
 @dataclass
 class _Skeleton:
     idx: np.ndarray        # flat indices (padded grid) of skeleton pixels, sorted
-    graph: object          # csr (n, n), edge weights in metres
+    graph: object          # csr (n, n), edge weights in cells
     er: np.ndarray         # edge endpoints (each undirected edge once)
     ec: np.ndarray
     junction: np.ndarray   # bool (n,)
@@ -180,9 +180,9 @@ def _components(n: int, er: np.ndarray, ec: np.ndarray,
     return int(out.max()) + 1 if keep.any() else 0, out
 
 
-def _analyse(mask: np.ndarray, w: int, res: float) -> _Skeleton:
+def _analyse(mask: np.ndarray, w: int) -> _Skeleton:
     idx = np.flatnonzero(mask)
-    graph, er, ec = _graph(idx, mask, w, res)
+    graph, er, ec = _graph(idx, mask, w)
     n = len(idx)
     degree = np.bincount(er, minlength=n) + np.bincount(ec, minlength=n)
     junction = degree >= 3
@@ -195,6 +195,11 @@ def _analyse(mask: np.ndarray, w: int, res: float) -> _Skeleton:
     adj = np.unique(np.column_stack((a[ok], c[ok])), axis=0) if ok.any() \
         else np.zeros((0, 2), dtype=np.int64)
     return _Skeleton(idx, graph, er, ec, junction, endpoint, arc, n_arcs, cluster, n_cl, adj)
+
+
+def _to_cells(res: float):
+    """metres -> cells, rounded to 4 decimals (area: apply it twice)."""
+    return lambda metres: round(float(metres) / res, 4)
 
 
 # --------------------------------------------------------------------------- main entry
@@ -214,7 +219,11 @@ def build_topology(occ_map: OccupancyMap, config: TopologyConfig | None = None,
     wp = w + 2
     dist, feat = ndimage.distance_transform_edt(free, return_indices=True)
     feat = feat.astype(np.int32, copy=False)
-    min_clear_cells = cfg.min_clearance / res
+    # Every length is compared in cells, as the grid gives it, with the settings converted once
+    # and rounded: a resolution that differs in its 8th digit (float32 over the wire, a decimal
+    # in a YAML file) gives the same topology instead of flipping a comparison at a boundary.
+    cells = _to_cells(res)
+    min_clear_cells = cells(cfg.min_clearance)
     traversable = free & (dist >= max(min_clear_cells, 1.0))
     report(1, steps, 'gvd')
     # 2. Ridge of the feature transform: neighbours with far-apart nearest obstacle cells.
@@ -250,25 +259,25 @@ def build_topology(occ_map: OccupancyMap, config: TopologyConfig | None = None,
     dflat = dist.ravel()
     sflat = strength.ravel()
     for _ in range(20):
-        sk = _analyse(mask, wp, res)
+        sk = _analyse(mask, wp)
         if sk.idx.size == 0:
             break
-        arc_len = np.bincount(sk.arc[sk.arc >= 0], minlength=sk.n_arcs) * res
+        arc_len = np.bincount(sk.arc[sk.arc >= 0], minlength=sk.n_arcs).astype(float)
         has_end = np.bincount(sk.arc[sk.endpoint & (sk.arc >= 0)], minlength=sk.n_arcs) > 0
         n_adj = np.bincount(sk.adj[:, 0], minlength=sk.n_arcs)
         cl_clear = np.zeros(max(sk.n_clusters, 1))
         if sk.n_clusters:
-            np.maximum.at(cl_clear, sk.cluster[sk.junction], dflat[sk.idx[sk.junction]] * res)
-        limit = np.full(sk.n_arcs, cfg.min_spur_length)
+            np.maximum.at(cl_clear, sk.cluster[sk.junction], dflat[sk.idx[sk.junction]])
+        min_spur = cells(cfg.min_spur_length)
+        limit = np.full(sk.n_arcs, min_spur)
         one = np.flatnonzero(n_adj == 1)
         if one.size:
             first = np.searchsorted(sk.adj[:, 0], one)
-            limit[one] = np.maximum(cfg.min_spur_length,
-                                    cfg.spur_factor * cl_clear[sk.adj[first, 1]])
+            limit[one] = np.maximum(min_spur, cfg.spur_factor * cl_clear[sk.adj[first, 1]])
         # weak arcs (nearest obstacle points subtend < 60 deg) are mostly wall noise
         on_arc = sk.arc >= 0
         weak = np.bincount(sk.arc[on_arc], weights=sflat[sk.idx[on_arc]] < 1.0,
-                           minlength=sk.n_arcs) > 0.5 * np.maximum(arc_len / res, 1)
+                           minlength=sk.n_arcs) > 0.5 * np.maximum(arc_len, 1)
         limit = np.where(weak, limit * cfg.weak_spur_factor, limit)
         limit[weak & (n_adj == 0)] = np.inf  # a free-standing weak arc is wall noise
         spur = has_end & (n_adj <= 1) & (arc_len < limit)
@@ -276,21 +285,21 @@ def build_topology(occ_map: OccupancyMap, config: TopologyConfig | None = None,
         lone = np.zeros(max(sk.n_clusters, 1), dtype=bool)
         if sk.n_clusters:
             lone[:sk.n_clusters] = np.bincount(sk.adj[:, 1], minlength=sk.n_clusters) == 0
-            cl_size = np.bincount(sk.cluster[sk.junction], minlength=sk.n_clusters) * res
-            lone[:sk.n_clusters] &= cl_size < cfg.min_spur_length
+            cl_size = np.bincount(sk.cluster[sk.junction], minlength=sk.n_clusters)
+            lone[:sk.n_clusters] &= cl_size < min_spur
         drop = (spur[np.maximum(sk.arc, 0)] & (sk.arc >= 0)) \
             | (lone[np.maximum(sk.cluster, 0)] & (sk.cluster >= 0))
         # whole skeleton components shorter than a spur (tiny loops, specks)
         _, comp = connected_components(sk.graph, directed=False)
-        small = np.bincount(comp) * res < cfg.min_spur_length
+        small = np.bincount(comp) < min_spur
         drop |= small[comp]
         if not drop.any():
             break
         mask[sk.idx[drop]] = False
         _thin(mask, ring)
-    sk = _analyse(mask, wp, res)
+    sk = _analyse(mask, wp)
     report(3, steps, 'nodes')
-    nodes, kinds = _select_nodes(sk, dflat, traversable, wp, res, cfg)
+    nodes, kinds = _select_nodes(sk, dflat, traversable, wp, cells, cfg)
     report(4, steps, 'edges')
     edges = _edges(sk, nodes)
     rows, cols = nodes // wp - 1, nodes % wp - 1
@@ -331,10 +340,10 @@ def _far_from(cands: np.ndarray, existing: list[int], w: int, radius_cells: floa
 
 
 def _select_nodes(sk: _Skeleton, dflat: np.ndarray, traversable: np.ndarray, w: int,
-                  res: float, cfg: TopologyConfig) -> tuple[np.ndarray, list[int]]:
+                  to_cells, cfg: TopologyConfig) -> tuple[np.ndarray, list[int]]:
     nodes: list[int] = []
     kinds: list[int] = []
-    rad = cfg.merge_radius / res
+    rad = to_cells(cfg.merge_radius)
 
     def add(cells, kind):
         nodes.extend(int(c) for c in cells)
@@ -357,7 +366,7 @@ def _select_nodes(sk: _Skeleton, dflat: np.ndarray, traversable: np.ndarray, w: 
         add(cells, NodeKind.DEAD_END)
     # Region nodes: GVD components, then traversable regions, without any node.
     if cfg.region_nodes:
-        min_cells = cfg.min_region_area / (res * res)
+        min_cells = to_cells(to_cells(cfg.min_region_area))
         if sk.idx.size:
             n_comp, comp = connected_components(sk.graph, directed=False)
             has = np.zeros(n_comp, dtype=bool)
@@ -391,7 +400,7 @@ def _select_nodes(sk: _Skeleton, dflat: np.ndarray, traversable: np.ndarray, w: 
                 add(best, NodeKind.REGION)
     # Arc nodes: farthest-point sampling along the GVD, spacing <= arc_spacing.
     if cfg.arc_spacing > 0 and sk.idx.size:
-        half = cfg.arc_spacing / 2.0
+        half = to_cells(cfg.arc_spacing) / 2.0
         pos = np.searchsorted(sk.idx, nodes) if nodes else np.zeros(0, dtype=np.int64)
         on = pos < len(sk.idx)
         on[on] &= sk.idx[pos[on]] == np.asarray(nodes, dtype=np.int64)[on]

@@ -1,0 +1,291 @@
+"""Correlative scan matching by branch and bound over a map (beyond the paper).
+
+The exhaustive search Cartographer uses to relocalize (Hess et al. 2016, after Olson 2009): a
+scan's points, rotated by each candidate yaw, are scored on a likelihood grid of the map (the
+mean over points of ``exp(-d^2 / 2 sigma^2)``, ``d`` the distance of a point's cell to the nearest
+occupied cell); translations are searched by branch and bound on precomputed grids whose level
+``k`` holds the maximum of the likelihood over the ``2^k x 2^k`` cells anchored at each cell, so
+the score of a window of translations bounds the score of every translation inside it.
+
+Here the search runs best-first in batches (numpy): the most promising windows of the pool are
+split into their four children together, leaves (single cells) set the bound, and windows whose
+bound falls below ``max(min_score, ratio * best)`` are pruned. With ``ratio < 1`` it also returns
+the rivals of the best pose (every leaf within that ratio), which is what an ambiguity test needs.
+
+The localizer searches only a few yaws (those of its spectral hypotheses and their flips) over
+the whole map, and the tracker a small window around its prediction; ``bench localize --peer``
+runs the full search (every yaw at 1 degree) as the reference.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from ..mapping.map_io import OccupancyMap
+from ..transforms import wrap_angle
+
+#: likelihood values are stored as uint8 (0..255)
+_SCALE = 255.0
+
+
+@dataclass(frozen=True)
+class CorrelativeResult:
+    """Leaves of one search, best first: ``poses`` (L, 3) map-frame sensor poses, ``scores``
+    (L,) their mean likelihood in [0, 1]; ``evaluated`` candidates scored at all levels;
+    ``complete`` is False when the time budget stopped the search early."""
+
+    poses: np.ndarray
+    scores: np.ndarray
+    evaluated: int
+    complete: bool
+    elapsed_ms: float
+
+    @property
+    def best_pose(self) -> tuple[float, float, float] | None:
+        return tuple(float(v) for v in self.poses[0]) if len(self.poses) else None
+
+    @property
+    def best_score(self) -> float:
+        return float(self.scores[0]) if len(self.scores) else 0.0
+
+
+class CorrelativeGrid:
+    """The precomputed grids of one map; :meth:`search` runs one branch-and-bound search.
+
+    ``sigma`` (m) is the width of the likelihood, ``depth`` the number of coarser levels (the top
+    level's windows are ``2**depth`` cells wide), ``max_range`` (m) the farthest scan point used
+    (farther points are dropped; the grids are padded by this much). Sensor positions are
+    restricted to free cells (``free_thresh``).
+    """
+
+    def __init__(self, occ_map: OccupancyMap, *, occupied_thresh: int = 65, free_thresh: int = 25,
+                 sigma: float = 0.1, depth: int = 6, max_range: float = 30.0) -> None:
+        if depth < 1:
+            raise ValueError(f'CorrelativeGrid: depth must be >= 1, got {depth}')
+        if not (sigma > 0 and max_range > 0):
+            raise ValueError('CorrelativeGrid: sigma and max_range must be > 0')
+        self.resolution = occ_map.resolution
+        self.origin = occ_map.origin
+        self.depth = int(depth)
+        self.max_range = float(max_range)
+        occ = occ_map.occupied_mask(occupied_thresh)
+        free = occ_map.free_mask(free_thresh)
+        self.height, self.width = occ.shape
+        h, w = occ.shape
+        dist = (ndimage.distance_transform_edt(~occ) * self.resolution if occ.any()
+                else np.full(occ.shape, np.inf))
+        lik = np.round(_SCALE * np.exp(-0.5 * (dist / sigma) ** 2)).astype(np.uint8)
+        # every point of a scan taken from inside the map lands within `pad` cells of it
+        self.pad = pad = (1 << self.depth) + int(math.ceil(self.max_range / self.resolution)) + 2
+        self._wp = w + 2 * pad
+        grid = np.zeros((h + 2 * pad, self._wp), np.uint8)
+        grid[pad:pad + h, pad:pad + w] = lik
+        anyfree = free.copy()
+        self._levels = [grid.ravel()]
+        self._free = [anyfree]
+        for k in range(1, self.depth + 1):
+            s = 1 << (k - 1)
+            grid = _window_max(grid, s)
+            anyfree = _window_any(anyfree, s)
+            self._levels.append(grid.ravel())
+            self._free.append(anyfree)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(g.nbytes for g in self._levels) + sum(f.nbytes for f in self._free)
+
+    # ------------------------------------------------------------------ geometry
+    def _grid_yaws(self, yaws) -> np.ndarray:
+        return np.asarray(yaws, float).ravel() - self.origin[2]
+
+    def _to_grid(self, xy: np.ndarray) -> np.ndarray:
+        """Map-frame points -> continuous grid coordinates (col, row)."""
+        ox, oy, oyaw = self.origin
+        c, s = math.cos(oyaw), math.sin(oyaw)
+        d = np.asarray(xy, float).reshape(-1, 2) - (ox, oy)
+        return np.column_stack((c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1])) \
+            / self.resolution
+
+    def poses_of(self, k: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                 thetas: np.ndarray) -> np.ndarray:
+        """Map-frame poses of candidates (yaw index ``k``, sensor cell ``rows, cols``)."""
+        ox, oy, oyaw = self.origin
+        c, s = math.cos(oyaw), math.sin(oyaw)
+        u = (np.asarray(cols) + 0.5) * self.resolution
+        v = (np.asarray(rows) + 0.5) * self.resolution
+        yaw = wrap_angle(thetas[np.asarray(k, int)] + oyaw)
+        return np.column_stack((ox + c * u - s * v, oy + s * u + c * v, yaw))
+
+    # ------------------------------------------------------------------ search
+    def search(self, points: np.ndarray, *, yaws=None, angular_step: float = math.radians(1.0),
+               window: tuple[float, float, float, float] | None = None, min_score: float = 0.5,
+               ratio: float = 1.0, max_leaves: int = 256, batch: int = 512,
+               budget_s: float | None = None) -> CorrelativeResult:
+        """Best poses of the sensor for ``points`` (N, 2) given in the sensor frame.
+
+        ``yaws``: map-frame yaws to try (default: the full turn every ``angular_step``);
+        ``window``: ``(x_min, y_min, x_max, y_max)`` map-frame box of sensor positions (default:
+        the whole map); leaves scoring at least ``max(min_score, ratio * best)`` are returned,
+        best first, at most ``max_leaves``. ``budget_s`` stops the search early (``complete``
+        False) once that much time has passed.
+        """
+        t0 = time.perf_counter()
+        pts = np.asarray(points, float).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.max_range]
+        if yaws is None:
+            n = max(int(round(2.0 * math.pi / angular_step)), 1)
+            yaws = self.origin[2] + 2.0 * math.pi * np.arange(n) / n
+        thetas = self._grid_yaws(yaws)
+        if len(pts) == 0 or len(thetas) == 0:
+            return _empty(0, t0)
+        base = self._offsets(pts, thetas)
+        norm = 1.0 / (_SCALE * len(pts))
+        r0, r1, c0, c1 = self._window_cells(window)
+        if r0 >= r1 or c0 >= c1:
+            return _empty(0, t0)
+        top = 1 << self.depth
+        rr, cc = np.meshgrid(np.arange(r0 - r0 % top, r1, top), np.arange(c0 - c0 % top, c1, top),
+                             indexing='ij')
+        rr, cc = rr.ravel(), cc.ravel()
+        ok = self._any_free(self.depth, rr, cc)
+        rr, cc = rr[ok], cc[ok]
+        n_k = len(thetas)
+        k = np.repeat(np.arange(n_k), len(rr))
+        r = np.tile(rr, n_k)
+        c = np.tile(cc, n_k)
+        ub = self._score(self.depth, base, k, r, c, norm)
+        evaluated = len(k)
+        lev = np.full(len(k), self.depth, np.int8)
+        best = -1.0
+        leaves: list[np.ndarray] = []
+        complete = True
+        while len(k):
+            bound = max(min_score, ratio * best)
+            keep = ub >= bound
+            k, r, c, lev, ub = k[keep], r[keep], c[keep], lev[keep], ub[keep]
+            if not len(k):
+                break
+            if budget_s is not None and time.perf_counter() - t0 > budget_s:
+                complete = False
+                break
+            if len(k) > batch:
+                take = np.argpartition(-ub, batch - 1)[:batch]
+                rest = np.ones(len(k), bool)
+                rest[take] = False
+            else:
+                take = np.arange(len(k))
+                rest = np.zeros(len(k), bool)
+            new = [(k[rest], r[rest], c[rest], lev[rest], ub[rest])]
+            for level in np.unique(lev[take]):
+                sel = take[lev[take] == level]
+                half = 1 << (int(level) - 1)
+                ck = np.repeat(k[sel], 4)
+                cr = np.repeat(r[sel], 4) + np.tile((0, 0, half, half), len(sel))
+                cc_ = np.repeat(c[sel], 4) + np.tile((0, half, 0, half), len(sel))
+                # children (windows of `half` cells) that overlap the searched rectangle
+                inside = (cr < r1) & (cr + half > r0) & (cc_ < c1) & (cc_ + half > c0)
+                inside[inside] = self._any_free(int(level) - 1, cr[inside], cc_[inside])
+                ck, cr, cc_ = ck[inside], cr[inside], cc_[inside]
+                sc = self._score(int(level) - 1, base, ck, cr, cc_, norm)
+                evaluated += len(ck)
+                if level == 1:
+                    good = sc >= max(min_score, ratio * best)
+                    if good.any():
+                        leaves.append(np.column_stack((ck[good], cr[good], cc_[good], sc[good])))
+                        best = max(best, float(sc[good].max()))
+                else:
+                    new.append((ck, cr, cc_, np.full(len(ck), level - 1, np.int8), sc))
+            k, r, c, lev, ub = (np.concatenate(a) for a in zip(*new))
+        if not leaves:
+            return _empty(evaluated, t0, complete)
+        lv = np.concatenate(leaves)
+        lv = lv[lv[:, 3] >= max(min_score, ratio * best)]
+        lv = lv[np.argsort(-lv[:, 3], kind='stable')][:max_leaves]
+        poses = self.poses_of(lv[:, 0].astype(int), lv[:, 1], lv[:, 2], thetas)
+        if window is not None:      # the searched cells cover the box; keep what lies in it
+            x0, y0, x1, y1 = window
+            inside = ((poses[:, 0] >= x0) & (poses[:, 0] <= x1) & (poses[:, 1] >= y0)
+                      & (poses[:, 1] <= y1))
+            poses, lv = poses[inside], lv[inside]
+        return CorrelativeResult(poses=poses, scores=lv[:, 3], evaluated=evaluated,
+                                 complete=complete, elapsed_ms=(time.perf_counter() - t0) * 1e3)
+
+    def score_poses(self, points: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """Mean likelihood (level 0) of ``points`` (sensor frame) at each map-frame pose (P, 3)."""
+        pts = np.asarray(points, float).reshape(-1, 2)
+        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.max_range]
+        poses = np.asarray(poses, float).reshape(-1, 3)
+        if len(pts) == 0 or len(poses) == 0:
+            return np.zeros(len(poses))
+        g = self._to_grid(poses[:, :2])
+        cols, rows = np.floor(g[:, 0]).astype(np.int64), np.floor(g[:, 1]).astype(np.int64)
+        thetas = self._grid_yaws(poses[:, 2])
+        # the offsets assume the sensor at the centre of its cell: use each pose's own fraction
+        frac = g - np.floor(g) - 0.5
+        c, s = np.cos(thetas), np.sin(thetas)
+        q = pts / self.resolution
+        x = c[:, None] * q[None, :, 0] - s[:, None] * q[None, :, 1] + frac[:, 0:1] + 0.5
+        y = s[:, None] * q[None, :, 0] + c[:, None] * q[None, :, 1] + frac[:, 1:2] + 0.5
+        pr = np.clip(np.floor(y).astype(np.int64) + rows[:, None], -self.pad, self.height
+                     + self.pad - 1)
+        pc = np.clip(np.floor(x).astype(np.int64) + cols[:, None], -self.pad, self.width
+                     + self.pad - 1)
+        vals = self._levels[0][(pr + self.pad) * self._wp + (pc + self.pad)]
+        return vals.sum(axis=1, dtype=np.int64) / (_SCALE * len(pts))
+
+    # ------------------------------------------------------------------ internals
+    def _offsets(self, pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
+        """Flat offsets (K, N) of each point's cell relative to the sensor cell, per yaw."""
+        c, s = np.cos(thetas), np.sin(thetas)
+        q = pts / self.resolution
+        x = c[:, None] * q[None, :, 0] - s[:, None] * q[None, :, 1] + 0.5
+        y = s[:, None] * q[None, :, 0] + c[:, None] * q[None, :, 1] + 0.5
+        return np.floor(y).astype(np.int64) * self._wp + np.floor(x).astype(np.int64)
+
+    def _score(self, level: int, base: np.ndarray, k, r, c, norm: float) -> np.ndarray:
+        if len(k) == 0:
+            return np.zeros(0)
+        cell = (np.asarray(r) + self.pad) * self._wp + (np.asarray(c) + self.pad)
+        vals = self._levels[level][base[k] + cell[:, None]]
+        return vals.sum(axis=1, dtype=np.int32) * norm
+
+    def _any_free(self, level: int, r, c) -> np.ndarray:
+        return self._free[level][np.asarray(r), np.asarray(c)]
+
+    def _window_cells(self, window) -> tuple[int, int, int, int]:
+        """Grid rows/cols ``[r0, r1) x [c0, c1)`` of the sensor positions to search."""
+        h, w = self.height, self.width
+        if window is None:
+            return 0, h, 0, w
+        x0, y0, x1, y1 = (float(v) for v in window)
+        corners = self._to_grid(np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]]))
+        c0, r0 = np.floor(corners.min(axis=0)).astype(int)
+        c1, r1 = np.floor(corners.max(axis=0)).astype(int) + 1
+        return max(int(r0), 0), min(int(r1), h), max(int(c0), 0), min(int(c1), w)
+
+
+def _window_max(grid: np.ndarray, s: int) -> np.ndarray:
+    """``out[r, c] = max(grid[r:r+2s, c:c+2s])`` given ``grid`` holds the s x s window maxima."""
+    out = grid.copy()
+    np.maximum(out[:-s], grid[s:], out=out[:-s])
+    out2 = out.copy()
+    np.maximum(out2[:, :-s], out[:, s:], out=out2[:, :-s])
+    return out2
+
+
+def _window_any(mask: np.ndarray, s: int) -> np.ndarray:
+    out = mask.copy()
+    out[:-s] |= mask[s:]
+    out2 = out.copy()
+    out2[:, :-s] |= out[:, s:]
+    return out2
+
+
+def _empty(evaluated: int, t0: float, complete: bool = True) -> CorrelativeResult:
+    return CorrelativeResult(poses=np.zeros((0, 3)), scores=np.zeros(0), evaluated=evaluated,
+                             complete=complete, elapsed_ms=(time.perf_counter() - t0) * 1e3)
