@@ -13,6 +13,7 @@ below it may change). Layers, each importing only the ones before it:
 """
 __version__ = '0.1.0'
 
+from . import threads  # noqa: F401,I100 - first: sets the BLAS threads before numpy loads
 from .config import (IndexConfig, LocalizerConfig, MapBuildConfig, MatcherConfig,
                      SimulationConfig, TopologyConfig, load_configs, load_index_config)
 from .evaluation.replay import ResultRow, replay_scans, summarize, write_results_csv

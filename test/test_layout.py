@@ -22,7 +22,7 @@ LAZY_OWN = {(f'{PKG}.cli.play_cmd', f'{PKG}.ros.play')}   # rclpy only for `ssm_
 MAX_FUNCTION_IMPORTS = 10
 #: data flows one way: a module imports only from lower layers (or its own subpackage)
 LAYERS = [
-    {'files'},
+    {'threads', 'files'},
     {'transforms', 'progress', 'config'},
     {'matching'},
     {'mapping'},
