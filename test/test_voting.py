@@ -39,9 +39,10 @@ def test_pooled_features_keep_one_view_per_wall_patch(depot):
     assert set(np.unique(voting.nodes)) <= set(range(len(index.features)))
 
 
-def test_votes_imply_the_true_pose(depot):
+@pytest.mark.parametrize('dims', [0, 12], ids=['exact', 'k-d tree'])
+def test_votes_imply_the_true_pose(depot, dims):
     bag, index = depot
-    voting = PoseVoting(index)
+    voting = PoseVoting(index, search_dims=dims)
     for k in range(3):
         truth = bag.ground_truth[bag.scans[k].stamp]
         votes = voting.vote(_query(bag, k, index))

@@ -19,6 +19,9 @@ class LocalizerConfig:
                                      'descriptors) to vote for a pose')
     vote_bin_xy: float = param(0.5, 'position bin of the pose-vote histogram, metres')
     vote_bin_yaw: float = param(math.radians(10.0), 'yaw bin of the pose-vote histogram, rad')
+    vote_descriptor_dims: int = param(12, 'nearest descriptors are searched in this many leading '
+                                          'principal axes with a k-d tree (0: exactly, by brute '
+                                          'force: cost linear in the map size)')
     vote_peaks: int = param(16, 'strongest pose-vote peaks whose correspondences are matched '
                                 'spectrally (eqs. 2-6)')
     top_n: int = param(10, 'peaks kept by the spectral coarse ranking (eq. 5) for the RANSAC '
@@ -104,7 +107,7 @@ class LocalizerConfig:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f'LocalizerConfig.{name} must be a finite number > 0, '
                                  f'got {value!r}')
-        for name in ('search_spread', 'search_alignments', 'refine_iterations', 'polish_iterations', 'surface_depth', 'search_min_score',
+        for name in ('vote_descriptor_dims', 'search_spread', 'search_alignments', 'refine_iterations', 'polish_iterations', 'surface_depth', 'search_min_score',
                      'contradiction_weight', 'max_contradicting', 'min_score', 'verify_margin', 'ambiguity_margin',
                      'min_position_std', 'min_yaw_std', 'min_points'):
             value = getattr(self, name)

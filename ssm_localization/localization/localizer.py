@@ -172,7 +172,8 @@ class GlobalLocalizer:
         self.surface = SurfaceModel.from_occupancy(occupied, m.resolution, m.origin,
                                                    cfg.surface_depth)
         self.caster = RayCaster(occupied, m.resolution, m.origin)
-        self.voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw)
+        self.voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw,
+                                 search_dims=cfg.vote_descriptor_dims)
         self._map_directions = self.voting.orientation_histogram()
         self._base_from_laser = inverse(cfg.laser_pose)
         self._paper_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
