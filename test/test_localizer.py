@@ -365,6 +365,25 @@ def test_a_scan_of_another_building_is_not_ok(rooms):
         assert out.status != 'ok', out.message
 
 
+def test_float32_and_float64_map_metadata_give_the_same_answers(depot):
+    """A map over the wire (float32 resolution and origin) and from a YAML file (decimals) is one
+    map: the same cells, the same checksum, the same nodes and the same answers."""
+    bag, _ = depot
+    occ = bag.map
+    wire = OccupancyMap(occ.data, float(np.float32(occ.resolution)),
+                        tuple(float(np.float32(v)) for v in occ.origin))
+    assert float(np.float32(0.05)) != 0.05                     # what a message carries
+    assert wire.resolution == occ.resolution and wire.origin == occ.origin
+    assert wire.checksum() == occ.checksum()
+    a, b = GlobalLocalizer(build_index(occ)), GlobalLocalizer(build_index(wire))
+    assert np.array_equal(a.index.node_xy, b.index.node_xy)
+    for scan in bag.scans[:4]:
+        args = (scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
+                scan.range_max)
+        x, y = a.localize_scan(*args), b.localize_scan(*args)
+        assert (x.status, x.pose) == (y.status, y.pose)
+
+
 # --------------------------------------------------------------------------- bad input
 
 INC = 2 * math.pi / 360

@@ -171,3 +171,17 @@ def test_corridor_widths_and_resolutions(res, width):
     assert build_topology(OccupancyMap(plus, res)).kind_counts()['branch'] == 1
     topo = build_topology(OccupancyMap(ell, res))
     assert topo.kind_counts()['branch'] == 0 and topo.kind_counts()['dead_end'] == 2
+
+
+@pytest.mark.parametrize('name', ['depot', 'turtlebot3_world'])
+def test_a_resolution_off_in_its_8th_digit_gives_the_same_nodes(name):
+    """Lengths are compared in cells with the settings rounded once: no comparison flips when the
+    resolution changes by far less than a cell (issue: the float32 resolution of a message)."""
+    occ = load_map_yaml(shared_data('maps', f'{name}.yaml'))
+    base = build_topology(occ)
+    for factor in (1.0 + 3e-7, 1.0 - 3e-7):
+        other = build_topology(OccupancyMap(occ.data, occ.resolution * factor, occ.origin))
+        a = np.sort(np.ravel_multi_index(occ.world_to_cell(base.node_xy), occ.shape))
+        b = np.sort(np.ravel_multi_index(occ.world_to_cell(other.node_xy), occ.shape))
+        assert np.array_equal(a, b), factor
+        assert np.array_equal(np.sort(base.node_kind), np.sort(other.node_kind))
