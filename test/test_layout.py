@@ -18,7 +18,8 @@ ROS_PACKAGES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'st
 #: optional heavy dependencies a function may import on first use
 OPTIONAL = {'matplotlib', 'rosbags', 'mcap'}
 #: function-level imports of the package's own modules that are allowed: (importer, imported)
-LAZY_OWN = {(f'{PKG}.cli.play_cmd', f'{PKG}.ros.play')}   # rclpy only for `ssm_localization play`
+LAZY_OWN = {(f'{PKG}.cli.play_cmd', f'{PKG}.ros.play'),    # rclpy only for `ssm_localization play`
+            (f'{PKG}.bench.soak', f'{PKG}.ros.soak')}     # ... and for `bench soak`
 MAX_FUNCTION_IMPORTS = 10
 #: data flows one way: a module imports only from lower layers (or its own subpackage)
 LAYERS = [

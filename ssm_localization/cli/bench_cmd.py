@@ -1,15 +1,17 @@
-"""``ssm_localization bench {scanmatch,index,localize}``: benchmarks that print tables."""
+"""``ssm_localization bench {scanmatch,index,localize,soak}``: benchmarks that print tables."""
 from __future__ import annotations
 
 import argparse
 
-from ..bench import index, localize, scanmatch
+from ..bench import index, localize, scanmatch, soak
 
 BENCHES = {
     'scanmatch': (scanmatch, 'scan matching accuracy (paper Table 2, Fig. 4, real scan pairs)'),
     'index': (index, 'index build time and peak memory per map'),
     'localize': (localize, 'global localization success, precision, error and latency per data '
                            'set'),
+    'soak': (soak, 'memory and pose rate of global_localizer in continuous mode on a looping '
+                   'bag'),
 }
 
 

@@ -159,3 +159,22 @@ def plot_match(ref_xy, new_xy, pose, out, pairs=None, truth=None, title: str = '
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return _save(plt, fig, out, dpi=110)
+
+
+def plot_soak(samples, warmup_s: float, path: str | Path) -> Path:
+    """RSS and pose rate of a soak run over time: ``samples`` of (seconds, MB, poses/s)."""
+    plt = _pyplot()
+    t, rss, rate = (np.array(v, float) for v in zip(*samples)) if samples else ([], [], [])
+    fig, ax = plt.subplots(figsize=(8, 4))
+    ax.plot(t, rss, 'b-', label='node RSS (MB)')
+    ax.axvline(warmup_s, color='grey', ls=':', label='end of warm-up')
+    ax.set_xlabel('time (s)')
+    ax.set_ylabel('RSS (MB)')
+    ax.set_ylim(0, max(list(rss) + [1.0]) * 1.2)
+    twin = ax.twinx()
+    twin.plot(t, rate, 'g.', label='poses / s')
+    twin.set_ylabel('poses / s')
+    ax.legend(loc='lower left')
+    twin.legend(loc='lower right')
+    ax.set_title('global_localizer, continuous mode on a looping bag')
+    return _save(plt, fig, path, 100)
