@@ -173,9 +173,10 @@ def run_set(localizer, scans, truth: dict, breakdown: bool = True) -> SetRun:
             continue
         if loc.status == 'ok' and _right(loc.pose, gt):
             covered.append(_coverage(loc.covariance, loc.pose, gt))
-            spectral += any(h.source == 'spectral' and _right(localizer.base_pose(h.initial_pose),
-                                                              gt) for h in loc.candidates) \
-                if breakdown else 0
+            spectral += any('spectral' in h.found_by and (_right(h.pose, gt) if h.refined else
+                                                          _right(localizer.base_pose(
+                                                              h.initial_pose), gt))
+                            for h in loc.candidates) if breakdown else 0
         elif breakdown:
             stages[miss_stage(localizer, loc, gt)] += 1
     return SetRun(rows, covered, stages, spectral)

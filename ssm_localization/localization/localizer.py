@@ -73,6 +73,10 @@ class Hypothesis:
     vicinity: float = 0.0                   # eq. (10), paper mode
     refined: bool = False
     score: float = 0.0                      # explained - weight x through-wall fraction
+    found_by: set[str] = field(default_factory=set)   # sources of the duplicates merged into it
+
+    def __post_init__(self) -> None:
+        self.found_by.add(self.source)
 
     @property
     def contradicting(self) -> float:
@@ -131,6 +135,19 @@ def distinct(a: Pose2, b: Pose2, xy: float, yaw: float) -> bool:
 
 def _same(a: Pose2, b: Pose2) -> bool:
     return math.hypot(a[0] - b[0], a[1] - b[1]) < 0.05 and abs(wrap_angle(a[2] - b[2])) < 0.02
+
+
+def _merged(ranked: list[Hypothesis], pose_of) -> list[Hypothesis]:
+    """``ranked`` without duplicates (the same pose within 5 cm and 0.02 rad): the first of each
+    stays and records the sources of the others in ``found_by``."""
+    out: list[Hypothesis] = []
+    for h in ranked:
+        twin = next((o for o in out if _same(pose_of(h), pose_of(o))), None)
+        if twin is None:
+            out.append(h)
+        else:
+            twin.found_by |= h.found_by
+    return out
 
 
 class _Clock:
@@ -358,11 +375,7 @@ class GlobalLocalizer:
                                        np.array([h.initial_pose for h in hyps]))
         for h, s in zip(hyps, scores):
             h.correlative = float(s)
-        out: list[Hypothesis] = []
-        for h in sorted(hyps, key=lambda h: -h.correlative):
-            if not any(_same(h.initial_pose, o.initial_pose) for o in out):
-                out.append(h)
-        return out
+        return _merged(sorted(hyps, key=lambda h: -h.correlative), lambda h: h.initial_pose)
 
     def refine(self, query: Query, hyps: list[Hypothesis],
                limit: int | None = None) -> list[Hypothesis]:
@@ -382,11 +395,7 @@ class GlobalLocalizer:
             h.score = h.explained
             h.pose = self.base_pose(h.laser_pose)
             h.covariance = self.report_covariance(r.covariance, h.laser_pose)
-        out: list[Hypothesis] = []
-        for h in sorted(todo, key=lambda h: -h.explained):
-            if not any(_same(h.laser_pose, o.laser_pose) for o in out):
-                out.append(h)
-        return out
+        return _merged(sorted(todo, key=lambda h: -h.explained), lambda h: h.laser_pose)
 
     def _worth_verifying(self, refined: list[Hypothesis]) -> list[Hypothesis]:
         """The refined hypotheses (best explained first) within ``verify_margin`` of the best
