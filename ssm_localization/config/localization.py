@@ -40,6 +40,8 @@ class LocalizerConfig:
     search_keep: int = param(4, 'distinct search leaves added as hypotheses')
     search_depth: int = param(5, 'levels of the branch and bound (top windows 2^depth cells)')
     search_sigma: float = param(0.1, 'width of the correlative likelihood, metres')
+    search_cell: float = param(0.05, 'cell size of the search, metres (rounded to a whole number '
+                                     'of map cells, at least one)')
     search_points: int = param(60, 'scan points (of the spatially even set) the search scores')
     search_alignments: int = param(2, 'further seed yaws from aligning the scan\'s wall '
                                       'directions with the map\'s')
@@ -58,7 +60,8 @@ class LocalizerConfig:
     estimate_depth: bool = param(True, 'estimate the wall-surface offset from the scan itself')
     # -- verification and the answer
     verify_hypotheses: int = param(3, 'refined hypotheses checked by ray casting, at least (best '
-                                      'explained first)')
+                                      'explained first), and every one that could still win or '
+                                      'be a rival')
     verify_margin: float = param(0.1, '... and every one whose explained fraction is within this '
                                       'of the best')
     verify_beams: int = param(120, 'beams (evenly chosen) ray-cast per verified hypothesis')
@@ -98,7 +101,7 @@ class LocalizerConfig:
     def __post_init__(self) -> None:
         positive = ('vote_neighbours', 'vote_bin_xy', 'vote_bin_yaw', 'vote_peaks', 'top_n',
                     'fine_ransac_iterations', 'search_seeds', 'search_step', 'search_keep',
-                    'search_depth', 'search_sigma', 'search_budget', 'search_points', 'verify_beams', 'refine_hypotheses',
+                    'search_depth', 'search_sigma', 'search_cell', 'search_budget', 'search_points', 'verify_beams', 'refine_hypotheses',
                     'verify_hypotheses', 'max_cast_range', 'surface_depth_std', 'beam_tolerance', 'score_sigma',
                     'distinct_xy', 'distinct_yaw', 'max_position_std', 'covariance_scale',
                     'sigma_d')

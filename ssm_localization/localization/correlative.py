@@ -59,26 +59,31 @@ class CorrelativeGrid:
     ``sigma`` (m) is the width of the likelihood, ``depth`` the number of coarser levels (the top
     level's windows are ``2**depth`` cells wide), ``max_range`` (m) the farthest scan point used
     (farther points are dropped; the grids are padded by this much). Sensor positions are
-    restricted to free cells (``free_thresh``).
+    restricted to free cells (``free_thresh``). ``coarsen`` > 1 searches on cells that many map
+    cells wide (the likelihood of a coarse cell is the best of its map cells, a coarse cell is
+    free when one of them is): the leaves are that coarse, the search that much cheaper.
     """
 
     def __init__(self, occ_map: OccupancyMap, *, occupied_thresh: int = 65, free_thresh: int = 25,
-                 sigma: float = 0.1, depth: int = 6, max_range: float = 30.0) -> None:
-        if depth < 1:
-            raise ValueError(f'CorrelativeGrid: depth must be >= 1, got {depth}')
+                 sigma: float = 0.1, depth: int = 6, max_range: float = 30.0,
+                 coarsen: int = 1) -> None:
+        if depth < 1 or coarsen < 1:
+            raise ValueError(f'CorrelativeGrid: depth and coarsen must be >= 1, got {depth}, '
+                             f'{coarsen}')
         if not (sigma > 0 and max_range > 0):
             raise ValueError('CorrelativeGrid: sigma and max_range must be > 0')
-        self.resolution = occ_map.resolution
+        self.resolution = occ_map.resolution * coarsen
         self.origin = occ_map.origin
         self.depth = int(depth)
         self.max_range = float(max_range)
         occ = occ_map.occupied_mask(occupied_thresh)
-        free = occ_map.free_mask(free_thresh)
-        self.height, self.width = occ.shape
-        h, w = occ.shape
-        dist = (ndimage.distance_transform_edt(~occ) * self.resolution if occ.any()
+        dist = (ndimage.distance_transform_edt(~occ) * occ_map.resolution if occ.any()
                 else np.full(occ.shape, np.inf))
-        lik = np.round(_SCALE * np.exp(-0.5 * (dist / sigma) ** 2)).astype(np.uint8)
+        lik = _block_reduce(np.round(_SCALE * np.exp(-0.5 * (dist / sigma) ** 2))
+                            .astype(np.uint8), coarsen, np.max)
+        free = _block_reduce(occ_map.free_mask(free_thresh), coarsen, np.any)
+        self.height, self.width = lik.shape
+        h, w = lik.shape
         # every point of a scan taken from inside the map lands within `pad` cells of it
         self.pad = pad = (1 << self.depth) + int(math.ceil(self.max_range / self.resolution)) + 2
         self._wp = w + 2 * pad
@@ -267,6 +272,16 @@ class CorrelativeGrid:
         c0, r0 = np.floor(corners.min(axis=0)).astype(int)
         c1, r1 = np.floor(corners.max(axis=0)).astype(int) + 1
         return max(int(r0), 0), min(int(r1), h), max(int(c0), 0), min(int(c1), w)
+
+
+def _block_reduce(a: np.ndarray, f: int, op) -> np.ndarray:
+    """``op`` over the ``f x f`` blocks of ``a`` (the last ones may be partial)."""
+    if f == 1:
+        return a
+    h, w = a.shape
+    pad = np.zeros(((h + f - 1) // f * f, (w + f - 1) // f * f), a.dtype)
+    pad[:h, :w] = a
+    return op(pad.reshape(pad.shape[0] // f, f, pad.shape[1] // f, f), axis=(1, 3))
 
 
 def _window_max(grid: np.ndarray, s: int) -> np.ndarray:

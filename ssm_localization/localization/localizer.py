@@ -185,7 +185,8 @@ class GlobalLocalizer:
         occupied = m.occupied_mask(index.config.occupied_thresh)
         self.grid = CorrelativeGrid(m, occupied_thresh=index.config.occupied_thresh,
                                     sigma=cfg.search_sigma, depth=cfg.search_depth,
-                                    max_range=cfg.max_cast_range)
+                                    max_range=cfg.max_cast_range,
+                                    coarsen=max(1, round(cfg.search_cell / m.resolution)))
         self.surface = SurfaceModel.from_occupancy(occupied, m.resolution, m.origin,
                                                    cfg.surface_depth)
         self.caster = RayCaster(occupied, m.resolution, m.origin)
@@ -264,7 +265,7 @@ class GlobalLocalizer:
         ranked = self._best_by_correlation(query, hyps)
         refined = self.refine(query, ranked)
         clock.lap('refine')
-        self.verify(query, self._worth_verifying(refined))
+        self.verify_contenders(query, refined)
         clock.lap('verify')
         return self.decide(query, refined, clock,
                            others=[h for h in ranked if not h.refined])
@@ -397,16 +398,25 @@ class GlobalLocalizer:
             h.covariance = self.report_covariance(r.covariance, h.laser_pose)
         return _merged(sorted(todo, key=lambda h: -h.explained), lambda h: h.laser_pose)
 
-    def _worth_verifying(self, refined: list[Hypothesis]) -> list[Hypothesis]:
-        """The refined hypotheses (best explained first) within ``verify_margin`` of the best
-        explained fraction, at least ``verify_hypotheses`` of them: any of these could win or be a
-        rival once the beams that see through walls are counted."""
+    def verify_contenders(self, query: Query, refined: list[Hypothesis]) -> None:
+        """Verify (best explained first) the ``verify_hypotheses`` first, every one within
+        ``verify_margin`` of the best explained fraction, then, until none is left, every one
+        that could still win or be a rival: a score never exceeds the explained fraction, so an
+        unverified hypothesis explaining less than the best verified score minus
+        ``ambiguity_margin`` can be neither."""
         cfg = self.config
         if not refined:
-            return []
+            return
         top = refined[0].explained
-        return [h for k, h in enumerate(refined)
-                if k < cfg.verify_hypotheses or h.explained >= top - cfg.verify_margin]
+        batch = [h for k, h in enumerate(refined)
+                 if k < cfg.verify_hypotheses or h.explained >= top - cfg.verify_margin]
+        while batch:
+            self.verify(query, batch)
+            limit = cfg.max_contradicting
+            best = max((h.score for h in refined
+                        if h.check is not None and h.contradicting <= limit), default=-np.inf)
+            batch = [h for h in refined
+                     if h.check is None and h.explained >= best - cfg.ambiguity_margin]
 
     def verify(self, query: Query, hyps: list[Hypothesis]) -> None:
         """Ray-cast the query's beams from every hypothesis at once; compare with the scan."""
