@@ -22,6 +22,9 @@ from ..mapping.index import MapIndex
 from ..matching.features import ScanFeatures
 from ..transforms import apply
 
+#: the tree proposes this many times the wanted neighbours; exact distances pick among them
+RERANK = 3
+
 #: the 27 bin offsets of a 3 x 3 x 3 neighbourhood
 _OFFSETS = np.array([(dx, dy, da) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for da in (-1, 0, 1)])
 
@@ -86,9 +89,9 @@ class PoseVoting:
         self.descriptors = np.concatenate(desc)[keep]
         self.nodes = np.concatenate(node)[keep]
         self._desc_sq = (self.descriptors.astype(np.float32) ** 2).sum(axis=1)
-        # nearest descriptors by a k-d tree in their ``search_dims`` leading principal axes:
-        # approximate (6 in 10 of the exact 20 nearest), as good for voting, and its cost grows
-        # with the log of the map's size instead of linearly (0: exact, by brute force)
+        # nearest descriptors: candidates from a k-d tree in the ``search_dims`` leading principal
+        # axes, re-ranked by their exact distance; the cost grows with the log of the map's size
+        # instead of linearly (0: exact, by brute force)
         self._tree = None
         if 0 < search_dims < self.descriptors.shape[1]:
             sample = self.descriptors[::max(1, len(self.descriptors) // 20000)].astype(float)
@@ -122,8 +125,13 @@ class PoseVoting:
             return Votes(z, z, np.zeros((0, 3), np.int64), np.zeros(0))
         k = min(self.neighbours, n_m)
         if self._tree is not None:
-            _, top = self._tree.query((q_desc - self._mean) @ self._axes, k=k)
-            top = np.asarray(top).reshape(n_q, k)
+            # candidates from the tree, re-ranked by their exact descriptor distance
+            kk = min(RERANK * k, n_m)
+            _, cand = self._tree.query((q_desc - self._mean) @ self._axes, k=kk)
+            cand = np.asarray(cand).reshape(n_q, kk)
+            diff = self.descriptors[cand] - q_desc[:, None, :]
+            d2 = np.einsum('qkd,qkd->qk', diff, diff)
+            top = np.take_along_axis(cand, np.argpartition(d2, k - 1, axis=1)[:, :k], axis=1)
         else:
             d2 = (q_desc ** 2).sum(axis=1)[:, None] + self._desc_sq[None, :] \
                 - 2.0 * (q_desc @ self.descriptors.T)
