@@ -2,7 +2,8 @@
 
 A bag path is a rosbag2 directory (with ``metadata.yaml``), a directory holding one ``.mcap``
 file, or a bare ``.mcap`` file. Topics and records: see ``bag_records``. A bag cut short mid-file
-yields its readable prefix (read with the ``mcap`` stream reader) and a ``RuntimeWarning``.
+yields its readable prefix (read with the ``mcap`` stream reader, when the optional ``mcap``
+package is installed) and a ``RuntimeWarning``.
 """
 from __future__ import annotations
 
@@ -53,10 +54,17 @@ def _resolve(path: str | Path) -> Path:
     return path
 
 
+MCAP_MISSING = ('reading what is left of a damaged bag needs the optional Python package mcap '
+                '(pip install mcap)')
+
+
 def _mcap_prefix(path: Path) -> tuple[list[tuple[str, str, bytes]], str]:
     """The messages readable from the start of an mcap file cut short (via the ``mcap`` stream
-    reader), and why reading stopped."""
-    from mcap import records, stream_reader
+    reader, an optional dependency), and why reading stopped."""
+    try:
+        from mcap import records, stream_reader
+    except ImportError:
+        return [], MCAP_MISSING
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str]] = {}
     out: list[tuple[str, str, bytes]] = []
