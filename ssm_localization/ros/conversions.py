@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped, Quaternion
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped, PoseWithCovarianceStamped, Quaternion
 from nav_msgs.msg import OccupancyGrid
 from sensor_msgs.msg import LaserScan
 
@@ -147,6 +147,16 @@ def pose_stamped(pose, stamp: Any, frame_id: str) -> PoseStamped:
     msg.header.stamp = time_msg(stamp)
     msg.header.frame_id = frame_id
     msg.pose = pose_msg(pose)
+    return msg
+
+
+def pose_array(poses, stamp: Any, frame_id: str) -> PoseArray:
+    """(x, y, yaw) poses -> geometry_msgs/PoseArray (non-finite poses are left out)."""
+    msg = PoseArray()
+    msg.header.stamp = time_msg(stamp)
+    msg.header.frame_id = frame_id
+    msg.poses = [pose_msg(p) for p in poses
+                 if p is not None and all(math.isfinite(float(v)) for v in p)]
     return msg
 
 

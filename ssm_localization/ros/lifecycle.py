@@ -5,7 +5,10 @@
   exception into ERROR without a word);
 - :func:`schedule_autostart`: parameter ``autostart``: configure and activate once spinning;
 - :func:`state_label`: the node's current state (``unconfigured``, ``inactive``, ``active``,
-  ``finalized`` or a transition state).
+  ``finalized`` or a transition state);
+- :func:`answer_invalid_transitions`: ``change_state`` with a transition the current state does
+  not offer answers ``success: false`` (rclpy raises inside the service, leaving the caller
+  without an answer).
 """
 from __future__ import annotations
 
@@ -13,6 +16,7 @@ import functools
 from typing import Any, Callable
 
 from lifecycle_msgs.msg import State
+from lifecycle_msgs.srv import ChangeState
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
@@ -76,3 +80,31 @@ def schedule_autostart(node: LifecycleNode, delay_sec: float = 0.0) -> None:
         node.get_logger().info('autostart: active')
 
     timer = node.create_timer(delay_sec, start)
+
+
+def available_transitions(node: LifecycleNode) -> dict[int, str]:
+    """``{transition id: label}`` of the transitions the current state offers."""
+    return {int(t[0]): str(t[1]) for t in node._state_machine.available_transitions}
+
+
+def answer_invalid_transitions(node: LifecycleNode) -> None:
+    """Make ``NODE/change_state`` answer ``success: false`` for a transition not offered now."""
+    service = node._service_change_state
+    original = service.callback
+
+    def change_state(request: ChangeState.Request, response: ChangeState.Response):
+        offered = available_transitions(node)
+        wanted = request.transition.label or request.transition.id
+        if request.transition.label:
+            ok = request.transition.label in offered.values()
+        else:
+            ok = int(request.transition.id) in offered
+        if not ok:
+            node.get_logger().warning(
+                f'change_state: transition {wanted!r} is not possible from state '
+                f'{state_label(node)} (possible: {", ".join(sorted(offered.values()))})')
+            response.success = False
+            return response
+        return original(request, response)
+
+    service.callback = change_state

@@ -1,21 +1,35 @@
 """The newest scan, and service calls waiting for the next one (a bounded queue, one worker).
 
 A ``relocalize`` / ``global_localization`` call asks for the next scan received after the call.
-Calls never block an executor thread: the service callback is a coroutine that awaits the
-:class:`rclpy.task.Future` :meth:`RequestQueue.submit` returns (or gets a refusal at once when
-the queue is full). One worker thread waits for a scan newer than the oldest waiting call,
-localizes it once and answers every call made before that scan with the same result, so a burst
-of calls costs one localization. A call that sees no scan within its ``scan_timeout`` is answered
-with that reason; :meth:`RequestQueue.cancel_all` answers every waiting call (deactivation).
+:meth:`RequestQueue.submit` gives the call a :class:`concurrent.futures.Future` to wait on, or a
+refusal at once when ``capacity`` calls are already waiting. One worker thread waits for a scan
+newer than the oldest waiting call, localizes it once and answers every call made before that
+scan with the same result, so a burst of calls costs one localization. A call that sees no scan
+within its ``scan_timeout`` is answered with that reason; :meth:`RequestQueue.cancel_all`
+answers every waiting call (deactivation).
+
+The service callbacks wait on their Future in an executor thread (rclpy Jazzy re-runs pending
+coroutine callbacks in a busy loop, so awaiting would spin a core while a call waits): the node's
+executor has ``capacity`` threads more than it otherwise needs, so waiting calls never starve the
+scan, map and lifecycle callbacks, and a call beyond ``capacity`` still finds a thread to be
+refused on.
+
+Answers to many calls go out in groups of :data:`ANSWER_GROUP`, :data:`GROUP_PAUSE` apart: with
+rmw_fastrtps every client of a service in a process receives every answer into its own queue
+before filtering its own, so a burst of answers would overflow clients with the default queue
+depth (10).
 """
 from __future__ import annotations
 
 import threading
 import time
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from rclpy.task import Future
+
+ANSWER_GROUP = 8       # answers sent together
+GROUP_PAUSE = 0.02     # s between groups
 
 
 @dataclass(frozen=True)
@@ -120,8 +134,7 @@ class RequestQueue:
         """Answer every waiting call with ``reason``; return how many there were."""
         with self._cv:
             calls, self._calls = self._calls, []
-        for call in calls:
-            _resolve(call.future, Answer(False, reason))
+        _resolve_all(calls, lambda call: Answer(False, reason))
         self._mailbox.wake()
         return len(calls)
 
@@ -137,8 +150,7 @@ class RequestQueue:
         with self._cv:
             late = [c for c in self._calls if c.deadline <= now]
             self._calls = [c for c in self._calls if c.deadline > now]
-        for call in late:
-            _resolve(call.future, Answer(False, self._no_scan(call.timeout)))
+        _resolve_all(late, lambda call: Answer(False, self._no_scan(call.timeout)))
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -164,10 +176,19 @@ class RequestQueue:
             with self._cv:
                 done = [c for c in self._calls if c.seq0 < seq]
                 self._calls = [c for c in self._calls if c.seq0 >= seq]
-            for call in done:
-                _resolve(call.future, answer)
+            _resolve_all(done, lambda call: answer)
+
+
+def _resolve_all(calls: list[_Call], answer_of: Callable[[_Call], Answer]) -> None:
+    """Answer ``calls`` in groups of ANSWER_GROUP, GROUP_PAUSE apart."""
+    for i, call in enumerate(calls):
+        if i and i % ANSWER_GROUP == 0:
+            time.sleep(GROUP_PAUSE)
+        _resolve(call.future, answer_of(call))
 
 
 def _resolve(future: Future, answer: Answer) -> None:
-    if not future.done():
+    try:
         future.set_result(answer)
+    except Exception:  # noqa: BLE001 - already resolved (InvalidStateError): first answer wins
+        pass
