@@ -63,13 +63,13 @@ def find_bag(name: str) -> Path:
 class RosHarness:
     """An rclpy context with a background MultiThreadedExecutor and a helper node."""
 
-    def __init__(self, args: list[str] | None = None) -> None:
+    def __init__(self, args: list[str] | None = None, num_threads: int = 6) -> None:
         import rclpy
         from rclpy.executors import MultiThreadedExecutor
         self.rclpy = rclpy
         self.context = rclpy.Context()
         rclpy.init(args=args, context=self.context)
-        self.executor = MultiThreadedExecutor(num_threads=6, context=self.context)
+        self.executor = MultiThreadedExecutor(num_threads=num_threads, context=self.context)
         self.node = rclpy.create_node(f'ssm_test_{os.getpid()}', context=self.context)
         self.executor.add_node(self.node)
         self._nodes = [self.node]

@@ -20,6 +20,7 @@ from conftest import RCLPY_SKIP_REASON, REPO, find_bag, venv_bin
 pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
 
 from geometry_msgs.msg import PoseWithCovarianceStamped  # noqa: E402
+from lifecycle_msgs.srv import GetState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
@@ -70,6 +71,16 @@ def _relocalize(ros, client, timeout: float = 60.0):
     return ros.call(client, Trigger.Request(), timeout)
 
 
+def _wait_active(ros, node: str = 'global_localizer', timeout: float = 30.0) -> bool:
+    """Wait until the lifecycle node (autostart) reports ``active`` on NODE/get_state."""
+    client = ros.node.create_client(GetState, f'{node}/get_state')
+
+    def active() -> bool:
+        res = ros.call(client, GetState.Request(), 5.0)
+        return res is not None and res.current_state.label == 'active'
+    return bool(ros.wait_for(active, timeout, 0.2))
+
+
 def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
     from ssm_localization import read_bag
     bag = find_bag('depot_sim')
@@ -84,6 +95,7 @@ def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
         marks = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
         client = ros.node.create_client(Trigger, 'relocalize')
         assert client.wait_for_service(timeout_sec=20.0), node_log.read_text()
+        assert _wait_active(ros), node_log.read_text()
 
         # before any map: a clear failure
         res = _relocalize(ros, client, 20.0)
@@ -155,6 +167,7 @@ def test_map_indexer_process_writes_index_that_global_localizer_loads(ros, tmp_p
         procs.append(_play_one_scan(bag, data, k, tmp_path / 'play_scan.log'))
         client = ros.node.create_client(Trigger, 'relocalize')
         assert client.wait_for_service(timeout_sec=20.0), localizer.text()
+        assert _wait_active(ros), localizer.text()
         res = None
         for _ in range(60):                     # until the index file is loaded
             res = _relocalize(ros, client)

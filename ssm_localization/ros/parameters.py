@@ -113,9 +113,14 @@ def laser_pose_of(values: dict[str, Any]) -> tuple[float, float, float]:
 
 
 LASER_PARAMS: dict[str, tuple[Any, str]] = {
-    'laser_x': (0.0, 'laser x on the robot base frame, metres'),
-    'laser_y': (0.0, 'laser y on the robot base frame, metres'),
-    'laser_yaw': (0.0, 'laser yaw on the robot base frame, radians (tf2 is not used)'),
+    'laser_x': (0.0, 'laser x on the robot base frame, metres (global_localizer: used when TF '
+                     'has no base_frame <- scan frame transform)'),
+    'laser_y': (0.0, 'laser y on the robot base frame, metres (as laser_x)'),
+    'laser_yaw': (0.0, 'laser yaw on the robot base frame, radians (as laser_x)'),
+}
+AUTOSTART: dict[str, tuple[Any, str]] = {
+    'autostart': (True, 'configure and activate on start; false: wait for a lifecycle manager '
+                        '(nav2 lifecycle_manager with bond_timeout 0.0) or ros2 lifecycle set'),
 }
 MAP_PARAMS: dict[str, tuple[Any, str]] = {
     'max_map_cells': (25_000_000, 'ignore larger maps (cells); 0 = no limit'),
@@ -125,15 +130,18 @@ MAP_PARAMS: dict[str, tuple[Any, str]] = {
 
 def indexer_parameters() -> dict[str, tuple[Any, str]]:
     """Every map_indexer parameter: ``{name: (default, description)}``."""
-    return {'index_file': ('', 'write the index here (npz) after each build; empty = do not '
+    return {**AUTOSTART,
+            'index_file': ('', 'write the index here (npz) after each build; empty = do not '
                                'write'),
             **LASER_PARAMS, **MAP_PARAMS, **config_parameter_table('index', IndexConfig())}
 
 
-#: global_localizer parameters that may change at run time (the others are read-only)
-DYNAMIC = ('scan_timeout', 'publish_initialpose', 'publish_markers')
+#: global_localizer parameters that may change in any lifecycle state (the others are read at
+#: configure and may change only while the node is unconfigured)
+DYNAMIC = ('scan_timeout', 'publish_initialpose', 'publish_markers', 'localize_on_start')
 
 NODE_PARAMS: dict[str, tuple[Any, str]] = {
+    **AUTOSTART,
     'mode': ('on_demand', 'on_demand: localize on the relocalize service only; continuous: '
                           'every scan (or at most rate Hz)'),
     'base_frame': ('base_link', 'robot base frame: global_pose is the pose of this frame'),
@@ -146,6 +154,9 @@ NODE_PARAMS: dict[str, tuple[Any, str]] = {
     'publish_initialpose': (False, 'also publish each pose on initialpose (AMCL / nav2 take '
                                    'over from there)'),
     'publish_markers': (True, 'publish topological_map (nodes, GVD, candidates, matched scan)'),
+    'localize_on_start': (False, 'once active, localize the incoming scans until the first ok '
+                                 'pose, publish it (and on initialpose when publish_initialpose), '
+                                 'then on demand'),
 }
 
 
