@@ -3,6 +3,7 @@ and small stand-in maps (the node tests run the same rules over DDS with real in
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -202,3 +203,19 @@ def test_no_index_file_no_map(harness_factory, tmp_path):
     h.source.start()
     assert h.log.lines == []
     assert h.source.map_state() == ('no map', 'waiting for a map on /map')
+
+
+def test_a_map_job_dropped_by_the_builder_is_not_taken_for_pending(harness_factory):
+    """A queued map job replaced by a newer job (IndexBuilder: the newest wins) must not block
+    the same map later ('being indexed' would be a lie)."""
+    h = harness_factory('corrupt', block_load=True)
+    h.builder.submit('slow', lambda progress: (h.release.wait(5), ('map', FakeMap('Z')))[1])
+    end = time.monotonic() + 5
+    while h.builder.status() != 'slow' and time.monotonic() < end:
+        time.sleep(0.01)
+    assert h.builder.status() == 'slow'
+    h.source.on_map(FakeMap('H'))            # queued behind 'slow', then replaced below
+    h.source.start()                         # the file job replaces the queued map job
+    h.release.set()
+    h.settle()
+    assert h.ready and h.ready[-1].checksum[:1] == 'H', [s.checksum for s in h.ready]

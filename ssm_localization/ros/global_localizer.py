@@ -177,6 +177,7 @@ class GlobalLocalizerNode(LifecycleNode):
             self.builder, self.get_logger(), index_path, self.resolve_topic_name('map'),
             load_index, self._build, self._make_served, save_index, self._on_ready,
             self._on_frame)
+        self.source.start()      # before the map subscription: a latched map may come at once
         self._map_sub = self.create_subscription(OccupancyGrid, 'map', self._on_map,
                                                  LATCHED_QOS, callback_group=self._group)
         self._scan_sub = self.create_subscription(LaserScan, 'scan', self._on_scan,
@@ -185,7 +186,6 @@ class GlobalLocalizerNode(LifecycleNode):
         self._queue = RequestQueue(self._mailbox, MAX_QUEUED_CALLS, self._serve,
                                    self._no_scan_text)
         self._configured_parts = True
-        self.source.start()
         self.get_logger().info(f'configured: mode {self.mode}, base frame {self.base_frame}; '
                                f'map: {self.source.map_state()[1]}')
         return SUCCESS

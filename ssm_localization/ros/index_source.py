@@ -116,7 +116,7 @@ class IndexSource:
                 if not same_frame:
                     self._served = ServedIndex(served.index, served.localizer, checksum,
                                                served.source, frame)
-            elif pending == checksum:
+            elif pending == checksum and checksum[:8] in self._builder.status():
                 self._log.info('received the map being indexed again: nothing to do')
                 return
             else:
