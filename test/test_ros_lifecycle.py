@@ -1,44 +1,43 @@
-"""Both nodes as lifecycle nodes over DDS: transitions through ``NODE/change_state``, each
-state's behaviour, the nav2-facing outputs (``global_localization``, ``candidates``,
-``/diagnostics``) and ``localize_on_start``, checked against a bag's ground truth."""
+"""
+Both nodes as lifecycle nodes over DDS.
+
+Transitions through ``NODE/change_state``, each state's behaviour, the nav2-facing outputs
+(``global_localization``, ``candidates``, ``/diagnostics``) and ``localize_on_start``, checked
+against a bag's ground truth.
+"""
 from __future__ import annotations
 
 import math
 import time
 
+from conftest import find_bag, REPO, RosHarness, synthetic_map
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from nav_msgs.msg import OccupancyGrid
 import numpy as np
 import pytest
-
-from conftest import RCLPY_SKIP_REASON, RosHarness, find_bag, synthetic_map
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped  # noqa: E402
-from lifecycle_msgs.msg import Transition  # noqa: E402
-from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
-from nav_msgs.msg import OccupancyGrid  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import qos_profile_sensor_data  # noqa: E402
-from sensor_msgs.msg import LaserScan  # noqa: E402
-from std_srvs.srv import Empty, Trigger  # noqa: E402
-from visualization_msgs.msg import MarkerArray  # noqa: E402
-
-from ssm_localization.io.bag_reader import read_bag  # noqa: E402
-from ssm_localization.ros.conversions import (laser_scan_from_record,  # noqa: E402
-                                              occupancy_grid_from_map, pose_from_msg)
-from ssm_localization.ros.global_localizer import (EXECUTOR_THREADS,  # noqa: E402
-                                                   GlobalLocalizerNode)
-from ssm_localization.ros.map_indexer import MapIndexerNode  # noqa: E402
-from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
-from ssm_localization.transforms import wrap_angle  # noqa: E402
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
+from ssm_localization.io.bag_reader import read_bag
+from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
+                                              pose_from_msg)
+from ssm_localization.ros.global_localizer import EXECUTOR_THREADS, GlobalLocalizerNode
+from ssm_localization.ros.map_indexer import MapIndexerNode
+from ssm_localization.ros.qos import LATCHED_QOS
+from ssm_localization.transforms import wrap_angle
+from std_srvs.srv import Empty, Trigger
+from visualization_msgs.msg import MarkerArray
+import yaml
 
 pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
 def ros(ros_domain):
-    """The harness with as many executor threads as the node's own main() uses."""
+    """Return the harness with as many executor threads as the node's own main() uses."""
     harness = RosHarness(num_threads=EXECUTOR_THREADS)
     try:
         yield harness
@@ -177,7 +176,7 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
         assert _close(pose_from_msg(cands.poses[0]), pose, 1e-6, 1e-6)
     # /diagnostics: OK with the key values of the last result
     assert ros.wait_for(lambda: any(rig.our_status(a) is not None and
-                                    dict((v.key, v.value) for v in rig.our_status(a).values)
+                                    {v.key: v.value for v in rig.our_status(a).values}
                                     .get('status') == 'ok' for a in rig.diagnostics), 5)
     status = next(rig.our_status(a) for a in reversed(rig.diagnostics)
                   if rig.our_status(a) is not None)
@@ -211,9 +210,33 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
     assert not res.success and 'finalized' in res.message
 
 
+def test_rviz_config_qos_matches_the_publishers(ros):
+    """The QoS the RViz config subscribes with matches what the running node offers."""
+    rviz = yaml.safe_load((REPO / 'rviz' / 'ssm_localization.rviz').read_text())
+    displays = {d['Topic']['Value']: d['Topic'] for d in
+                rviz['Visualization Manager']['Displays'] if 'Topic' in d}
+    rig = Rig(ros)
+    assert ros.wait_for(lambda: rig.lifecycle.state() == 'active', 10)
+    durability = {DurabilityPolicy.TRANSIENT_LOCAL: 'Transient Local',
+                  DurabilityPolicy.VOLATILE: 'Volatile'}
+    reliability = {ReliabilityPolicy.RELIABLE: 'Reliable',
+                   ReliabilityPolicy.BEST_EFFORT: 'Best Effort'}
+    for topic in ('/global_pose', '/candidates', '/topological_map'):
+        infos = ros.wait_for(lambda: [i for i in ros.node.get_publishers_info_by_topic(topic)
+                                      if i.node_name == 'global_localizer'], 5)
+        assert infos, f'global_localizer does not publish {topic}'
+        qos = infos[0].qos_profile
+        assert displays[topic]['Durability Policy'] == durability[qos.durability], topic
+        assert displays[topic]['Reliability Policy'] == reliability[qos.reliability], topic
+
+
 def test_autostart_and_localize_on_start_hand_over_on_initialpose(ros, bag):
-    """Default autostart: active with no lifecycle call; localize_on_start publishes a right
-    initialpose with no service call, then stays on demand."""
+    """
+    Default autostart.
+
+    Active with no lifecycle call; localize_on_start publishes a right initialpose with no service
+    call, then stays on demand.
+    """
     rig = Rig(ros, localize_on_start=True, publish_initialpose=True)
     assert ros.wait_for(lambda: rig.lifecycle.state() == 'active', 10)
     rig.map_pub.publish(occupancy_grid_from_map(bag.map))
