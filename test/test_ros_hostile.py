@@ -117,7 +117,7 @@ BAD_AT_START = [
     ('scan_timeout', 0.0, 'out of range'),
     ('rate', -1.0, 'out of range'),
     ('max_map_cells', -5, 'out of range'),
-    ('localizer.prefilter', -3, 'out of range'),
+    ('index.beams', -3, 'out of range'),
     ('localizer.top_n', 0, 'top_n'),
     ('localizer.sigma_d', math.nan, 'finite'),
     ('mode', 'sideways', 'must be one of on_demand, continuous'),
@@ -152,7 +152,7 @@ def test_bad_parameters_at_run_time_are_refused_and_the_node_keeps_serving(ros):
                                 ('rate', -1.0, 'out of range'),
                                 ('rate', 2.0, 'unconfigured'),
                                 ('mode', 'continuous', 'unconfigured'),
-                                ('localizer.prefilter', -3, 'out of range'),
+                                ('index.beams', -3, 'out of range'),
                                 ('publish_markers', 'yes', 'type')]:
         result = rig.set_remote(name, value)
         assert not result.successful and reason in result.reason, (name, value, result.reason)
