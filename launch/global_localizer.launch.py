@@ -1,4 +1,5 @@
-"""Launch ``global_localizer`` on its own (a lifecycle node).
+"""
+Launch ``global_localizer`` on its own (a lifecycle node).
 
 By default (``autostart:=true``) the node configures and activates itself. With
 ``autostart:=false`` it stays unconfigured until a lifecycle manager (or
@@ -17,7 +18,6 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode
-
 from ssm_localization.ros.launch_support import launch_bool, namespaced_params_file
 
 PACKAGE = 'ssm_localization'

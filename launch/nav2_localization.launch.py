@@ -1,4 +1,5 @@
-"""nav2 localization with start-up global localization.
+"""
+nav2 localization with start-up global localization.
 
 Starts nav2's ``map_server`` and ``amcl`` (managed, with bonds, by
 ``lifecycle_manager_localization``, as nav2_bringup's localization launch does) and
@@ -23,7 +24,6 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
-
 from ssm_localization.ros.launch_support import launch_bool, namespaced_params_file
 
 PACKAGE = 'ssm_localization'

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Check that every dependency key of package.xml resolves with rosdep for ROS 2 Jazzy on Ubuntu
-24.04 (noble).
+"""
+Check that every package.xml key resolves with rosdep for ROS 2 Jazzy on Ubuntu 24.04 (noble).
 
 A key resolves when it is a package released in rosdistro's ``jazzy/distribution.yaml`` or a
 rosdep key of ``rosdep/base.yaml`` / ``rosdep/python.yaml`` with a rule for Ubuntu noble.
@@ -22,13 +22,13 @@ Prints one line per key and exits 1 when a key does not resolve (or is not in th
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 import datetime
+from pathlib import Path
 import subprocess
 import sys
-import xml.etree.ElementTree as ET
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
+import xml.etree.ElementTree as ET
 
 import yaml
 
@@ -61,7 +61,7 @@ class Resolution:
         return f'  MISSING  {self.key:<28} {self.reason}'
 
     def as_record(self) -> dict[str, str]:
-        """The snapshot entry."""
+        """Return the snapshot entry."""
         if self.ok:
             return {'source': self.source, 'resolves_to': self.detail}
         return {'unresolved': self.reason}
@@ -104,7 +104,7 @@ def _installer_rule(rule: Any) -> str | None:
 
 
 def os_rule(entry: Any) -> tuple[str | None, str]:
-    """The Ubuntu noble resolution of one rosdep entry: ``(rule text or None, reason)``."""
+    """Return the Ubuntu noble resolution of one rosdep entry: ``(rule text or None, reason)``."""
     if not isinstance(entry, dict) or OS not in entry:
         return None, f'no {OS} rule'
     rule = entry[OS]
@@ -186,7 +186,7 @@ def check_snapshot(snapshot: dict[str, Any], keys: list[str]) -> list[Resolution
 
 
 def snapshot_text(results: list[Resolution], origin: dict[str, str]) -> str:
-    """The snapshot file: header comment, provenance, one record per key."""
+    """Return the snapshot file: header comment, provenance, one record per key."""
     doc = {
         'rosdistro_commit': origin['commit'],
         'rosdistro_commit_date': origin['date'],
@@ -195,10 +195,11 @@ def snapshot_text(results: list[Resolution], origin: dict[str, str]) -> str:
         'files': [*ROSDEP_FILES, DISTRIBUTION_FILE],
         'keys': {r.key: r.as_record() for r in results},
     }
-    header = ('# Rosdep keys of package.xml (and a few looked up for the README), resolved against\n'
-              '# ros/rosdistro at the commit below. Written by scripts/check_rosdep_keys.py\n'
-              '# --rosdistro DIR --write-snapshot; read by test/test_rosdep_keys.py (CI cannot\n'
-              '# fetch rosdistro). Refresh it when package.xml gains a key.\n')
+    header = ('# Rosdep keys of package.xml (and a few looked up for the README), resolved\n'
+              '# against ros/rosdistro at the commit below. Written by\n'
+              '# scripts/check_rosdep_keys.py --rosdistro DIR --write-snapshot; read by\n'
+              '# test/test_rosdep_keys.py (CI cannot fetch rosdistro). Refresh it when\n'
+              '# package.xml gains a key.\n')
     return header + yaml.safe_dump(doc, sort_keys=False, width=100)
 
 
@@ -215,8 +216,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     keys = package_keys(args.package_xml)
     if args.rosdistro is not None:
-        results, origin = check_live(args.rosdistro, keys + [k for k in args.also
-                                                              if k not in keys])
+        extra_keys = [k for k in args.also if k not in keys]
+        results, origin = check_live(args.rosdistro, keys + extra_keys)
         print(f'{args.package_xml}: {len(keys)} keys; ros/rosdistro {origin["commit"][:12]} '
               f'({origin["date"]}), ROS 2 {DISTRO} on {OS} {CODENAME}')
         if args.write_snapshot:

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Record the ROS 2 Jazzy names our launch and RViz files use, for the offline static tests.
+"""
+Record the ROS 2 Jazzy names our launch and RViz files use, for the offline static tests.
 
 ``launch``, ``launch_ros``, nav2 and RViz are not installable from PyPI, so the tests check the
 launch files (``test/test_launch_files.py``) against a snapshot of the names these projects
@@ -17,10 +18,10 @@ from __future__ import annotations
 import argparse
 import ast
 import datetime
+from pathlib import Path
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import yaml
 
@@ -59,7 +60,7 @@ class Source:
                               text=True, check=True).stdout
 
     def read(self, relpath: str) -> str:
-        """The text of ``relpath`` at the branch."""
+        """Return the text of ``relpath`` at the branch."""
         return self._git('show', f'{BRANCH}:{relpath}')
 
     def files(self, prefix: str) -> list[str]:
@@ -104,7 +105,7 @@ def declared_parameters(texts: list[str]) -> list[str]:
 
 
 def snapshot(launch: Source, launch_ros: Source, nav2: Source, rviz: Source) -> dict:
-    """The snapshot document."""
+    """Return the snapshot document."""
     sources = {'launch': launch, 'launch_ros': launch_ros}
     modules = {mod: exported_names(sources[repo].read(path))
                for mod, (repo, path) in MODULES.items()}

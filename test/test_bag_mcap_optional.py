@@ -1,5 +1,9 @@
-"""``mcap`` is optional (rosdistro has no key for it): without it a damaged bag gets an error
-saying what to install, and intact bags read as before (rosbags reads mcap itself)."""
+"""
+``mcap`` is optional (rosdistro has no key for it).
+
+Without it a damaged bag gets an error saying what to install, and intact bags read as before
+(rosbags reads mcap itself).
+"""
 from __future__ import annotations
 
 import math
@@ -8,7 +12,6 @@ import sys
 
 import numpy as np
 import pytest
-
 from ssm_localization.io.bag_reader import MCAP_MISSING, read_bag
 from ssm_localization.io.bag_records import ScanRecord
 from ssm_localization.io.bag_writer import write_bag

@@ -1,5 +1,8 @@
-"""The package builds with colcon like any ament_python package, and package.xml declares what
-the ROS adapters import."""
+"""
+The package builds with colcon like any ament_python package.
+
+package.xml declares what the ROS adapters import.
+"""
 from __future__ import annotations
 
 import ast
@@ -9,9 +12,8 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
-import pytest
-
 from conftest import REPO, venv_bin
+import pytest
 
 PKG = 'ssm_localization'
 

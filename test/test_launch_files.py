@@ -1,4 +1,5 @@
-"""Static checks of launch/*.launch.py and rviz/ssm_localization.rviz.
+"""
+Static checks of launch/*.launch.py and rviz/ssm_localization.rviz.
 
 ``launch``, ``launch_ros``, nav2 and RViz cannot be installed here (no PyPI wheels), so the
 launch files are never executed by these tests. Instead each file is parsed with ``ast`` and
@@ -12,15 +13,14 @@ commits inside). test_colcon.py checks that colcon installs these files.
 from __future__ import annotations
 
 import ast
-import importlib
-import sys
 from dataclasses import dataclass, field
+import importlib
 from pathlib import Path
-
-import pytest
-import yaml
+import sys
 
 from conftest import REPO
+import pytest
+import yaml
 
 PKG = 'ssm_localization'
 LAUNCH = REPO / 'launch'
@@ -46,7 +46,7 @@ class LaunchedNode:
 
 
 def _const(node: ast.AST):
-    """A literal's value (None when not a literal)."""
+    """Return a literal's value (None when not a literal)."""
     try:
         return ast.literal_eval(node)
     except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
@@ -86,7 +86,7 @@ def _module_constants(tree: ast.Module) -> dict:
 
 
 def _value(node: ast.AST, constants: dict):
-    """A literal or a module constant's value."""
+    """Return a literal or a module constant's value."""
     if isinstance(node, ast.Name) and node.id in constants:
         return constants[node.id]
     return _const(node)
@@ -102,7 +102,7 @@ class LaunchFile:
         self.functions = {f.name: f for f in self.tree.body if isinstance(f, ast.FunctionDef)}
 
     def imports(self) -> list[tuple[str, str, int]]:
-        """(module, name, line) of every ``from module import name``."""
+        """Return (module, name, line) of every ``from module import name``."""
         return [(n.module, a.name, n.lineno) for n in ast.walk(self.tree)
                 if isinstance(n, ast.ImportFrom) for a in n.names]
 
@@ -194,8 +194,12 @@ def _flat(d: dict, prefix: str = '') -> set[str]:
 
 
 def _our_parameters(node_name: str) -> set[str]:
-    """Every parameter a node of ours declares: the generated params file lists them all
-    (test_ros_params.py checks that against the running nodes)."""
+    """
+    Every parameter a node of ours declares.
+
+    The generated params file lists them all (test_ros_params.py checks that against the running
+    nodes).
+    """
     doc = yaml.safe_load((REPO / 'config' / 'ssm_localization.yaml').read_text())
     return _flat(doc[node_name]['ros__parameters']) | AUTOMATIC_PARAMETERS
 

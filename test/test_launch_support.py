@@ -1,13 +1,16 @@
-"""ssm_localization.ros.launch_support: launch argument parsing and namespaced params files
-(the latter checked against rcl's own params-file matching)."""
+"""
+ssm_localization.ros.launch_support.
+
+Launch argument parsing and namespaced params files (the latter checked against rcl's own
+params-file matching).
+"""
 from __future__ import annotations
 
-import pytest
-import yaml
-
 from conftest import RCLPY_SKIP_REASON
+import pytest
 from ssm_localization.ros.launch_support import (launch_bool, namespace_tokens,
                                                  namespaced_params_file, nest_under_namespace)
+import yaml
 
 
 @pytest.mark.parametrize('text, value', [('true', True), ('True', True), ('1', True),
@@ -50,8 +53,12 @@ def test_namespaced_params_file_errors_name_the_file(tmp_path):
 
 @pytest.mark.ros
 def test_rcl_applies_the_namespaced_file_and_not_the_plain_one(ros_domain, tmp_path):
-    """The reason for the helper: rcl matches ``global_localizer:`` only in the root namespace,
-    the nested form inside ``/robot1``."""
+    """
+    The reason for the helper.
+
+    Rcl matches ``global_localizer:`` only in the root namespace, the nested form inside
+    ``/robot1``.
+    """
     rclpy = pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
     plain = tmp_path / 'params.yaml'
     plain.write_text(yaml.safe_dump(

@@ -1,46 +1,43 @@
-"""Hostile input against global_localizer over real DDS (issue 13, items 1, 2 and 4): bad
-parameters at start and at run time, bursts of concurrent calls from several clients, corrupt
-and wrong index files, a map whose frame changes, a map swap. Every case: a clear answer, the
-node alive, the next good call right."""
+"""
+Hostile input against global_localizer over real DDS (issue 13, items 1, 2 and 4).
+
+Bad parameters at start and at run time, bursts of concurrent calls from several clients, corrupt
+and wrong index files, a map whose frame changes, a map swap. Every case: a clear answer, the node
+alive, the next good call right.
+"""
 from __future__ import annotations
 
 import math
 import subprocess
 import time
 
-import numpy as np
+from conftest import RosHarness, synthetic_map, venv_bin
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
+from nav_msgs.msg import OccupancyGrid
 import pytest
-
-from conftest import RCLPY_SKIP_REASON, RosHarness, synthetic_map, venv_bin
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped  # noqa: E402
-from nav_msgs.msg import OccupancyGrid  # noqa: E402
-from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
-from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
-from rcl_interfaces.srv import SetParameters  # noqa: E402
-from rclpy.exceptions import ParameterException  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import QoSProfile, qos_profile_sensor_data  # noqa: E402
-from sensor_msgs.msg import LaserScan  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
-
-from ssm_localization.io.simulate import SimulationConfig, simulate  # noqa: E402
-from ssm_localization.mapping.index import build_index, save_index  # noqa: E402
-from ssm_localization.ros.conversions import (laser_scan_from_record,  # noqa: E402
-                                              occupancy_grid_from_map, pose_from_msg)
-from ssm_localization.ros.global_localizer import (EXECUTOR_THREADS,  # noqa: E402
-                                                   MAX_QUEUED_CALLS, GlobalLocalizerNode)
-from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
-from ssm_localization.transforms import wrap_angle  # noqa: E402
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rclpy.exceptions import ParameterException
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import LaserScan
+from ssm_localization.io.simulate import simulate, SimulationConfig
+from ssm_localization.mapping.index import build_index, save_index
+from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
+                                              pose_from_msg)
+from ssm_localization.ros.global_localizer import (EXECUTOR_THREADS, GlobalLocalizerNode,
+                                                   MAX_QUEUED_CALLS)
+from ssm_localization.ros.qos import LATCHED_QOS
+from ssm_localization.transforms import wrap_angle
+from std_srvs.srv import Trigger
 
 pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
 def ros(ros_domain):
-    """The harness with as many executor threads as the node's own main() uses."""
+    """Return the harness with as many executor threads as the node's own main() uses."""
     harness = RosHarness(num_threads=EXECUTOR_THREADS)
     try:
         yield harness

@@ -1,20 +1,19 @@
-"""IndexSource: index_file vs the map topic (issue 13 item 4), with the real IndexBuilder thread
-and small stand-in maps (the node tests run the same rules over DDS with real indexes)."""
+"""
+IndexSource: index_file vs the map topic.
+
+(issue 13 item 4), with the real IndexBuilder thread and small stand-in maps (the node tests run
+the same rules over DDS with real indexes).
+"""
 from __future__ import annotations
 
-import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
+import threading
+import time
 
 import pytest
-
-from conftest import RCLPY_SKIP_REASON
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from ssm_localization.ros.index_builder import IndexBuilder  # noqa: E402
-from ssm_localization.ros.index_source import FILE, IndexSource, ServedIndex  # noqa: E402
+from ssm_localization.ros.index_builder import IndexBuilder
+from ssm_localization.ros.index_source import FILE, IndexSource, ServedIndex
 
 
 @dataclass
@@ -206,8 +205,11 @@ def test_no_index_file_no_map(harness_factory, tmp_path):
 
 
 def test_a_map_job_dropped_by_the_builder_is_not_taken_for_pending(harness_factory):
-    """A queued map job replaced by a newer job (IndexBuilder: the newest wins) must not block
-    the same map later ('being indexed' would be a lie)."""
+    """
+    A queued map job replaced by a newer job must not block the same map later.
+
+    IndexBuilder: the newest job wins; 'being indexed' would be a lie then.
+    """
     h = harness_factory('corrupt', block_load=True)
     h.builder.submit('slow', lambda progress: (h.release.wait(5), ('map', FakeMap('Z')))[1])
     end = time.monotonic() + 5

@@ -1,19 +1,17 @@
-"""The laser pose source: TF first, the laser_* parameters as the fallback (with a stand-in TF
-buffer: tf2_ros has no PyPI wheel)."""
+"""
+The laser pose source.
+
+TF first, the laser_* parameters as the fallback (with a stand-in TF buffer: tf2_ros has no PyPI
+wheel).
+"""
 from __future__ import annotations
 
 import math
 
+from geometry_msgs.msg import TransformStamped
 import pytest
-
-from conftest import RCLPY_SKIP_REASON
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from geometry_msgs.msg import TransformStamped  # noqa: E402
-
-from ssm_localization.ros import laser_pose  # noqa: E402
-from ssm_localization.ros.laser_pose import LaserPoseSource, mount_from_transform  # noqa: E402
+from ssm_localization.ros import laser_pose
+from ssm_localization.ros.laser_pose import LaserPoseSource, mount_from_transform
 
 PARAMS = (0.1, -0.05, 0.2)
 
@@ -34,8 +32,11 @@ def _transform(x=0.0, y=0.0, z=0.0, roll=0.0, pitch=0.0, yaw=0.0) -> TransformSt
 
 
 class StandInBuffer:
-    """tf2_ros.Buffer's lookup_transform: answers for known (target, source) pairs, else raises
-    as tf2 does; counts the lookups."""
+    """
+    tf2_ros.Buffer's lookup_transform.
+
+    Answers for known (target, source) pairs, else raises as tf2 does; counts the lookups.
+    """
 
     def __init__(self, transforms: dict | None = None) -> None:
         self.transforms = dict(transforms or {})

@@ -4,27 +4,21 @@ from __future__ import annotations
 import math
 import time
 
+from conftest import find_bag, synthetic_map
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import OccupancyGrid
 import numpy as np
 import pytest
-
-from conftest import RCLPY_SKIP_REASON, find_bag, synthetic_map
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from geometry_msgs.msg import PoseWithCovarianceStamped  # noqa: E402
-from nav_msgs.msg import OccupancyGrid  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import qos_profile_sensor_data  # noqa: E402
-from sensor_msgs.msg import LaserScan  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
-from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
-
-from ssm_localization.ros.conversions import (laser_scan_from_record,  # noqa: E402
-                                              occupancy_grid_from_map, pose_from_msg,
-                                              stamp_to_sec)
-from ssm_localization.ros.lifecycle import state_label  # noqa: E402
-from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
-from ssm_localization.transforms import wrap_angle  # noqa: E402
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
+from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
+                                              pose_from_msg, stamp_to_sec)
+from ssm_localization.ros.lifecycle import state_label
+from ssm_localization.ros.qos import LATCHED_QOS
+from ssm_localization.transforms import wrap_angle
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
 
 pytestmark = pytest.mark.ros
 
@@ -41,7 +35,7 @@ def _has_nodes(arr: MarkerArray) -> bool:
 
 
 def _simulated(occ, count: int = 6, seed: int = 3):
-    from ssm_localization import SimulationConfig, simulate
+    from ssm_localization import simulate, SimulationConfig
     return simulate(occ, SimulationConfig(count=count, seed=seed, clearance=0.4,
                                           noise_sigma=0.005, stamp0=100.0))
 
@@ -68,7 +62,7 @@ class Localizer:
         assert ros.wait_for(lambda: state_label(self.node) == 'active', 10), 'not autostarted'
 
     def served(self):
-        """The localizer the node serves now (None before the first index)."""
+        """Return the localizer the node serves now (None before the first index)."""
         served = self.node.source.served
         return served.localizer if served is not None else None
 
@@ -98,8 +92,12 @@ class Localizer:
         return future.result()
 
     def new_pose(self, timeout: float = 5.0):
-        """The pose published by the last successful relocalize: the service answer and the
-        topic message travel separately, so wait (bounded) for the message to arrive."""
+        """
+        Return the pose published by the last successful relocalize.
+
+        The service answer and the topic message travel separately, so wait (bounded) for the
+        message to arrive.
+        """
         assert self.ros.wait_for(lambda: len(self.poses) > self.n_poses_before, timeout), \
             'no global_pose after relocalize'
         return self.poses[-1]
@@ -136,7 +134,8 @@ def test_map_indexer_markers_index_file_and_newest_map_wins(ros, tmp_path):
     for occ in maps:
         pub.publish(occupancy_grid_from_map(occ))
         time.sleep(0.05)
-    assert ros.wait_for(lambda: node.index is not None and node.builder is not None and not node.builder.busy
+    assert ros.wait_for(lambda: node.index is not None and node.builder is not None
+                        and not node.builder.busy
                         and np.array_equal(node.index.map.data, maps[-1].data), 120)
     assert ros.wait_for(lambda: np.array_equal(load_index(index_file).map.data, maps[-1].data),
                         10)
@@ -163,7 +162,8 @@ def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
     pub.publish(occupancy_grid_from_map(first))
     assert ros.wait_for(lambda: started, 10)
     pub.publish(occupancy_grid_from_map(second))
-    assert ros.wait_for(lambda: node.index is not None and node.builder is not None and not node.builder.busy, 60)
+    assert ros.wait_for(lambda: node.index is not None and node.builder is not None
+                        and not node.builder.busy, 60)
     assert np.array_equal(node.index.map.data, second.data)
     assert len(started) == 2
     assert 'dropped, a newer map arrived' in capfd.readouterr().err
@@ -213,12 +213,17 @@ def test_localizer_service_bad_input_and_kidnapping(ros, capfd):
     # bad scans over the wire: each is refused with a reason, the node keeps serving
     good = laser_scan_from_record(sim.scans[0])
     bad = []
-    empty = LaserScan(); empty.header = good.header; bad.append(empty)
-    nan = laser_scan_from_record(sim.scans[0]); nan.ranges = [math.nan] * len(good.ranges)
+    empty = LaserScan()
+    empty.header = good.header
+    bad.append(empty)
+    nan = laser_scan_from_record(sim.scans[0])
+    nan.ranges = [math.nan] * len(good.ranges)
     bad.append(nan)
-    inf = laser_scan_from_record(sim.scans[0]); inf.ranges = [math.inf] * len(good.ranges)
+    inf = laser_scan_from_record(sim.scans[0])
+    inf.ranges = [math.inf] * len(good.ranges)
     bad.append(inf)
-    zero = laser_scan_from_record(sim.scans[0]); zero.angle_increment = 0.0
+    zero = laser_scan_from_record(sim.scans[0])
+    zero.angle_increment = 0.0
     bad.append(zero)
     capfd.readouterr()
     for scan in bad:

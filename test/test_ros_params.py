@@ -1,17 +1,17 @@
-"""config/ssm_localization.yaml and docs/PARAMETERS.md against the parameters the nodes declare,
-and --params-file."""
+"""
+Check the generated params file and docs against the declared parameters.
+
+config/ssm_localization.yaml and docs/PARAMETERS.md against the parameters the nodes declare, and
+--params-file.
+"""
 from __future__ import annotations
 
+from conftest import REPO
 import pytest
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.lifecycle import TransitionCallbackReturn
 import yaml
-
-from conftest import RCLPY_SKIP_REASON, REPO
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-import rclpy  # noqa: E402
-from rclpy.exceptions import ParameterException  # noqa: E402
-from rclpy.lifecycle import TransitionCallbackReturn  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

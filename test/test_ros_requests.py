@@ -1,6 +1,7 @@
-"""RequestQueue / ScanMailbox: batched answers, deadlines, bounded queue, cancellation.
+"""
+RequestQueue / ScanMailbox: batched answers, deadlines, bounded queue, cancellation.
 
-(The same queue over DDS, with many clients: test_ros_hostile.py.)
+The same queue over DDS, with many clients: test_ros_hostile.py.
 """
 from __future__ import annotations
 
@@ -8,12 +9,7 @@ import threading
 import time
 
 import pytest
-
-from conftest import RCLPY_SKIP_REASON
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox  # noqa: E402
+from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox
 
 
 def _wait(futures, timeout=5.0):

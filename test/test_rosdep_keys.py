@@ -1,4 +1,5 @@
-"""Every package.xml key resolves with rosdep for ROS 2 Jazzy on Ubuntu 24.04.
+"""
+Every package.xml key resolves with rosdep for ROS 2 Jazzy on Ubuntu 24.04.
 
 CI cannot fetch ros/rosdistro, so the check runs against the committed snapshot
 ``test/data/rosdep_jazzy_noble.yaml`` (rosdistro commit and dates inside), written by
@@ -12,10 +13,9 @@ import re
 import subprocess
 import sys
 
+from conftest import REPO
 import pytest
 import yaml
-
-from conftest import REPO
 
 SCRIPT = REPO / 'scripts' / 'check_rosdep_keys.py'
 
@@ -69,7 +69,7 @@ def _git(cwd, *args):
 
 @pytest.fixture
 def rosdistro(tmp_path):
-    """A tiny rosdistro git repository covering the rule forms rosdep uses."""
+    """Return a tiny rosdistro git repository covering the rule forms rosdep uses."""
     root = tmp_path / 'rosdistro'
     (root / 'rosdep').mkdir(parents=True)
     (root / 'jazzy').mkdir()

@@ -1,4 +1,5 @@
-"""``/diagnostics`` (diagnostic_msgs/DiagnosticArray) of global_localizer.
+"""
+``/diagnostics`` (diagnostic_msgs/DiagnosticArray) of global_localizer.
 
 One status named ``<node name>: localization`` (hardware_id: the node's fully qualified name):
 level OK / WARN / ERROR for an ``ok`` / ``ambiguous`` / ``failed`` last localization; before the
@@ -12,7 +13,6 @@ import math
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-
 from ssm_localization.ros.conversions import time_msg
 
 LEVELS = {'ok': DiagnosticStatus.OK, 'ambiguous': DiagnosticStatus.WARN,
@@ -31,7 +31,7 @@ def _number(value: Any, fmt: str) -> str:
 def localization_status(node_name: str, fqn: str, map_state: str, loc: Any = None,
                         map_detail: str = '', frame: str = '', lifecycle: str = '',
                         mode: str = '') -> DiagnosticStatus:
-    """The status of the last localization ``loc`` (a core Localization, or None)."""
+    """Return the status of the last localization ``loc`` (a core Localization, or None)."""
     if map_state not in MAP_STATES:
         raise ValueError(f'map state must be one of {MAP_STATES}, got {map_state!r}')
     status = DiagnosticStatus(name=f'{node_name}: localization', hardware_id=fqn)

@@ -1,4 +1,5 @@
-"""``global_localizer`` lifecycle node: single-scan global localization for nav2 and scripts.
+"""
+``global_localizer`` lifecycle node: single-scan global localization for nav2 and scripts.
 
 Lifecycle (rclpy.lifecycle; ``NODE/get_state``, ``NODE/change_state``):
 
@@ -19,13 +20,13 @@ serves ``relocalize`` (std_srvs/Trigger) and ``global_localization`` (std_srvs/E
 """
 from __future__ import annotations
 
+from concurrent.futures import TimeoutError as FutureTimeout
 import copy
 import dataclasses
 import math
+from pathlib import Path
 import threading
 import time
-from concurrent.futures import TimeoutError as FutureTimeout
-from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -33,31 +34,30 @@ from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
-from std_srvs.srv import Empty, Trigger
-from visualization_msgs.msg import MarkerArray
-
 from ssm_localization.config import IndexConfig, LocalizerConfig
 from ssm_localization.localization.localizer import GlobalLocalizer
 from ssm_localization.mapping.index import build_index, load_index, save_index
 from ssm_localization.ros import markers
-from ssm_localization.ros.conversions import (ScanArgs, pose_array, pose_with_covariance,
-                                              scan_args_from_msg, scan_points, scan_problem)
+from ssm_localization.ros.conversions import (pose_array, pose_with_covariance, scan_args_from_msg,
+                                              scan_points, scan_problem, ScanArgs)
 from ssm_localization.ros.diagnostics import diagnostic_array, localization_status
 from ssm_localization.ros.executor import spin
 from ssm_localization.ros.index_builder import IndexBuilder
 from ssm_localization.ros.index_source import IndexSource, ServedIndex
 from ssm_localization.ros.laser_pose import LaserMount, LaserPoseSource
-from ssm_localization.ros.lifecycle import (FAILURE, SUCCESS, UNCONFIGURED,
-                                            answer_invalid_transitions, schedule_autostart,
-                                            state_id, state_label, transition)
+from ssm_localization.ros.lifecycle import (answer_invalid_transitions, FAILURE,
+                                            schedule_autostart, state_id, state_label, SUCCESS,
+                                            transition, UNCONFIGURED)
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.parameter_guard import ParameterGuard
-from ssm_localization.ros.parameters import (DYNAMIC, build_config, laser_pose_of,
+from ssm_localization.ros.parameters import (build_config, DYNAMIC, laser_pose_of,
                                              localizer_parameters)
 from ssm_localization.ros.qos import LATCHED_QOS, SERVICE_QOS
 from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox
+from std_srvs.srv import Empty, Trigger
+from visualization_msgs.msg import MarkerArray
 
 MODES = ('on_demand', 'continuous')
 MARKER_PERIOD = 1.0          # seconds between marker updates in continuous mode
@@ -87,7 +87,8 @@ def check_configs(values: dict[str, Any]) -> str | None:
 
 
 def with_laser_pose(localizer: GlobalLocalizer, pose: tuple[float, float, float]):
-    """The same localizer (shared index, trees, wall model) for a laser at ``pose`` on the base.
+    """
+    Return the same localizer (shared index, trees, wall model) for a laser at ``pose``.
 
     The laser pose only enters the localizer's conversion of laser poses to base poses, read
     from ``config`` at each call, so a shallow copy with another config is exact and cheap.
@@ -134,7 +135,7 @@ class GlobalLocalizerNode(LifecycleNode):
 
     # ------------------------------------------------------------------ lifecycle
     def _configured_state(self) -> str | None:
-        """The state label while configure-time parameters are in use, else None."""
+        """Return the state label while configure-time parameters are in use, else None."""
         return None if state_id(self) == UNCONFIGURED else state_label(self)
 
     @transition('configure')

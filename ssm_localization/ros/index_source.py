@@ -1,4 +1,5 @@
-"""Which index global_localizer serves: the ``index_file``, or the map on the ``map`` topic.
+"""
+Which index global_localizer serves: the ``index_file``, or the map on the ``map`` topic.
 
 Rules (issue 13, item 4: no silent use of a wrong index, no dead end):
 
@@ -17,9 +18,9 @@ The jobs run in the :class:`IndexBuilder` thread; callbacks ``on_ready(served)``
 """
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
 from pathlib import Path
+import threading
 from typing import Any, Callable
 
 FILE = 'index file'
@@ -38,7 +39,8 @@ class ServedIndex:
 
 
 class IndexSource:
-    """Arbitrates between ``index_file`` and the map topic; see the module docstring.
+    """
+    Arbitrates between ``index_file`` and the map topic; see the module docstring.
 
     ``make(index, source) -> ServedIndex`` wraps a loaded / built index; ``load(path) -> index``
     and ``build(occupancy_map, progress) -> index`` do the work; ``save(index, path)`` writes
@@ -66,7 +68,7 @@ class IndexSource:
     # ------------------------------------------------------------------ state
     @property
     def served(self) -> ServedIndex | None:
-        """The index being served (None before the first one is ready)."""
+        """Return what is being served now, or None before the first index is ready."""
         with self._lock:
             return self._served
 
@@ -96,7 +98,7 @@ class IndexSource:
                 self._save_to = self._path
 
     def on_map(self, occ: Any) -> None:
-        """A usable map arrived on the topic."""
+        """Return a usable map arrived on the topic."""
         with self._lock:
             self._topic_map = occ
             waiting = self._file_pending
@@ -144,7 +146,7 @@ class IndexSource:
 
     # ------------------------------------------------------------------ builder callbacks
     def on_done(self, result: tuple[str, Any], label: str) -> None:
-        """IndexBuilder ``on_done``: a job finished."""
+        """Handle IndexBuilder ``on_done``: a job finished."""
         kind, index = result
         served = self._make(index, label if kind == FILE else 'map topic')
         if kind == FILE:
@@ -180,7 +182,7 @@ class IndexSource:
                 self._log.error(f'cannot write index file {save_to}: {exc}')
 
     def on_error(self, exc: BaseException, label: str) -> None:
-        """IndexBuilder ``on_error``: a job failed."""
+        """Handle IndexBuilder ``on_error``: a job failed."""
         reason = f'{type(exc).__name__}: {exc}'
         if label.startswith(FILE):
             with self._lock:

@@ -1,4 +1,5 @@
-"""Where the laser sits on the robot: from TF when tf2_ros is importable, else the parameters.
+"""
+Where the laser sits on the robot: from TF when tf2_ros is importable, else the parameters.
 
 ``tf2_ros`` comes with every ROS 2 install but not with the PyPI wheels this package's venv uses,
 so it is imported here once, guarded. :class:`LaserPoseSource` asks TF for the pose of the
@@ -9,9 +10,9 @@ rigidly).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 import threading
-from dataclasses import dataclass
 from typing import Any, Callable
 
 try:  # optional: any real ROS 2 install has it, the PyPI wheels do not
@@ -21,7 +22,6 @@ except ImportError:  # pragma: no cover - depends on the install
 
 from rclpy.duration import Duration
 from rclpy.time import Time
-
 from ssm_localization.transforms import Pose2
 
 TF_AVAILABLE = tf2_ros is not None
@@ -29,7 +29,8 @@ TF_AVAILABLE = tf2_ros is not None
 
 @dataclass(frozen=True)
 class LaserMount:
-    """The laser's pose on the base, whether it is mounted upside down, and where it came from.
+    """
+    The laser's pose on the base, whether it is mounted upside down, and where it came from.
 
     ``mirrored``: the laser's z axis points down, so its scans turn the other way round in the
     base frame (the scan is mirrored before localization). ``source`` is ``tf``, ``parameters``
@@ -51,7 +52,8 @@ class LaserMount:
 
 
 def mount_from_transform(transform: Any) -> tuple[Pose2, bool, float]:
-    """``(planar pose, mirrored, tilt in rad)`` of a geometry_msgs/Transform.
+    """
+    ``(planar pose, mirrored, tilt in rad)`` of a geometry_msgs/Transform.
 
     The yaw is that of the laser's x axis projected on the base plane; ``tilt`` is the angle
     between the laser's z axis and the base's z axis (or -z when mirrored).
@@ -71,7 +73,8 @@ def mount_from_transform(transform: Any) -> tuple[Pose2, bool, float]:
 
 
 class LaserPoseSource:
-    """The laser's mounting on ``base_frame`` for a scan frame: TF first, parameters second.
+    """
+    The laser's mounting on ``base_frame`` for a scan frame: TF first, parameters second.
 
     ``buffer`` is anything with tf2_ros.Buffer's ``lookup_transform(target, source, time,
     timeout)`` (tests pass a stand-in); ``None`` means tf2_ros is unavailable. ``log(text)`` is
@@ -97,7 +100,7 @@ class LaserPoseSource:
     @classmethod
     def for_node(cls, node: Any, base_frame: str, fallback: Pose2,
                  log: Callable[[str], None]) -> 'LaserPoseSource':
-        """A source listening to ``/tf`` and ``/tf_static`` through ``node`` if tf2_ros exists."""
+        """Return a source listening to ``/tf`` and ``/tf_static`` if tf2_ros exists."""
         if not TF_AVAILABLE:
             return cls(base_frame, fallback, log)
         buffer = tf2_ros.Buffer()
@@ -107,7 +110,7 @@ class LaserPoseSource:
 
     @property
     def uses_tf(self) -> bool:
-        """True when TF is asked at all (tf2_ros importable or a stand-in buffer given)."""
+        """Return True when TF is asked at all (tf2_ros importable or a stand-in buffer given)."""
         return self._buffer is not None
 
     def close(self) -> None:
@@ -119,7 +122,7 @@ class LaserPoseSource:
             self._listener = None
 
     def mount(self, frame_id: str) -> LaserMount:
-        """The mounting of the laser whose scans carry ``frame_id``."""
+        """Return the mounting of the laser whose scans carry ``frame_id``."""
         frame = (frame_id or '').lstrip('/')
         if frame and frame == self.base_frame:
             result = LaserMount((0.0, 0.0, 0.0), False, 'base frame',

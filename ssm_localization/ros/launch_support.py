@@ -1,4 +1,5 @@
-"""Helpers for the launch files in ``launch/`` (plain Python: no ``launch`` import here).
+"""
+Helpers for the launch files in ``launch/`` (plain Python: no ``launch`` import here).
 
 ROS 2 params files name their nodes (``global_localizer: ros__parameters: ...``). rcl matches
 such a key against the node's fully qualified name, so ``global_localizer`` does not reach
@@ -9,8 +10,8 @@ nav2's ``RewrittenYaml(root_key=namespace)`` does, without depending on nav2.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
+import tempfile
 from typing import Any
 
 import yaml
@@ -20,7 +21,8 @@ _FALSE = ('false', '0', 'no', 'off')
 
 
 def launch_bool(text: str, name: str) -> bool:
-    """A launch argument's text (``true``/``false``, ``1``/``0``, ...) as a bool.
+    """
+    Return a launch argument's text (``true``/``false``, ``1``/``0``, ...) as a bool.
 
     Raises ``ValueError`` naming the argument for anything else.
     """
@@ -38,7 +40,11 @@ def namespace_tokens(namespace: str) -> list[str]:
 
 
 def load_params_mapping(path: str | os.PathLike) -> dict[str, Any]:
-    """The top-level mapping of a ROS 2 params file; ``ValueError`` naming the file otherwise."""
+    """
+    Return the top-level mapping of a ROS 2 params file.
+
+    ``ValueError`` naming the file otherwise.
+    """
     file = Path(path).expanduser()
     if not file.is_file():
         raise ValueError(f'params file not found: {file}')
@@ -55,7 +61,8 @@ def load_params_mapping(path: str | os.PathLike) -> dict[str, Any]:
 
 
 def nest_under_namespace(data: dict[str, Any], namespace: str) -> dict[str, Any]:
-    """Nest every node section of a params mapping under ``namespace`` (unchanged if empty).
+    """
+    Nest every node section of a params mapping under ``namespace`` (unchanged if empty).
 
     Keys that already are absolute (``/robot1/global_localizer``, ``/**``) are kept at the top
     level: rcl matches them as they are.
@@ -72,7 +79,8 @@ def nest_under_namespace(data: dict[str, Any], namespace: str) -> dict[str, Any]
 
 
 def namespaced_params_file(path: str | os.PathLike, namespace: str) -> str:
-    """A params file whose node sections reach nodes pushed into ``namespace``.
+    """
+    Return a params file whose node sections reach nodes pushed into ``namespace``.
 
     Returns ``path`` itself when ``namespace`` is empty, else the path of a new temporary file
     holding :func:`nest_under_namespace` of its content (left for the launched process to read).

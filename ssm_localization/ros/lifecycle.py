@@ -1,4 +1,5 @@
-"""Lifecycle helpers shared by the nodes (rclpy.lifecycle, ROS 2 Jazzy).
+"""
+Lifecycle helpers shared by the nodes (rclpy.lifecycle, ROS 2 Jazzy).
 
 - :func:`transition`: wraps an ``on_configure`` / ``on_activate`` / ... method so an exception
   is logged with its reason and the transition fails cleanly (rclpy turns an uncaught
@@ -47,17 +48,18 @@ def transition(name: str) -> Callable[[Transition], Transition]:
 
 
 def state_id(node: LifecycleNode) -> int:
-    """The current state id (lifecycle_msgs/State constants)."""
+    """Return the current state id (lifecycle_msgs/State constants)."""
     return int(node._state_machine.current_state[0])
 
 
 def state_label(node: LifecycleNode) -> str:
-    """The current state's label."""
+    """Return the current state's label."""
     return str(node._state_machine.current_state[1])
 
 
 def schedule_autostart(node: LifecycleNode, delay_sec: float = 0.0) -> None:
-    """Configure, then activate, ``node`` once its executor spins (parameter ``autostart``).
+    """
+    Configure, then activate, ``node`` once its executor spins (parameter ``autostart``).
 
     A failed step is logged and leaves the node where it stopped (unconfigured or inactive),
     still answering its services and ``get_state`` / ``change_state``.

@@ -1,4 +1,5 @@
-"""``map_indexer`` lifecycle node: builds the topological index of every map it receives.
+"""
+``map_indexer`` lifecycle node: builds the topological index of every map it receives.
 
 Lifecycle: configure reads the parameters and creates the publisher; activate subscribes
 ``map`` (nav_msgs/OccupancyGrid, reliable + transient-local) and indexes each map in a worker
@@ -9,27 +10,26 @@ the node configures and activates itself.
 """
 from __future__ import annotations
 
-import threading
 from pathlib import Path
+import threading
 from typing import Any
 
 from nav_msgs.msg import OccupancyGrid
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from visualization_msgs.msg import MarkerArray
-
 from ssm_localization.config import IndexConfig
 from ssm_localization.mapping.index import build_index, save_index
 from ssm_localization.ros import markers
 from ssm_localization.ros.executor import spin
 from ssm_localization.ros.index_builder import IndexBuilder
-from ssm_localization.ros.lifecycle import (FAILURE, SUCCESS, UNCONFIGURED,
-                                            answer_invalid_transitions, schedule_autostart,
-                                            state_id, state_label, transition)
+from ssm_localization.ros.lifecycle import (answer_invalid_transitions, FAILURE,
+                                            schedule_autostart, state_id, state_label, SUCCESS,
+                                            transition, UNCONFIGURED)
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.parameter_guard import ParameterGuard
 from ssm_localization.ros.parameters import build_config, indexer_parameters, laser_pose_of
 from ssm_localization.ros.qos import LATCHED_QOS
+from visualization_msgs.msg import MarkerArray
 
 
 def check_index_config(values: dict[str, Any]) -> str | None:

@@ -1,4 +1,5 @@
-"""Validation of the nodes' parameters at the boundary (issue 13, item 1).
+"""
+Validation of the nodes' parameters at the boundary (issue 13, item 1).
 
 Every parameter is declared with a :class:`ParameterDescriptor` that carries its range (rclpy
 refuses out-of-range values, NaN and infinities included, at start-up and at run time) and an
@@ -42,7 +43,7 @@ NON_EMPTY = ('base_frame',)
 
 def descriptor(name: str, default: Any, description: str, dynamic: bool,
                choices: Iterable[str] = ()) -> ParameterDescriptor:
-    """The descriptor of one parameter: description, range, constraints in words."""
+    """Return the descriptor of one parameter: description, range, constraints in words."""
     d = ParameterDescriptor(description=description)
     notes = [] if dynamic else ['configure-time: settable while unconfigured']
     if isinstance(default, bool):
@@ -82,7 +83,8 @@ def value_problem(name: str, value: Any, choices: Iterable[str] = ()) -> str | N
 
 
 class ParameterGuard:
-    """The on-set-parameters callback of a node (see the module docstring).
+    """
+    The on-set-parameters callback of a node (see the module docstring).
 
     ``table``: ``{name: (default, description)}`` of the node's parameters; ``configured()``:
     True while configure-time parameters are in use (inactive / active); ``check_all(values)``:
@@ -115,7 +117,7 @@ class ParameterGuard:
         return values
 
     def values(self) -> dict[str, Any]:
-        """The current value of every declared parameter of the table."""
+        """Return the current value of every declared parameter of the table."""
         return {name: self._node.get_parameter(name).value for name in self._table
                 if self._node.has_parameter(name)}
 

@@ -1,4 +1,5 @@
-"""The newest scan, and service calls waiting for the next one (a bounded queue, one worker).
+"""
+The newest scan, and service calls waiting for the next one (a bounded queue, one worker).
 
 A ``relocalize`` / ``global_localization`` call asks for the next scan received after the call.
 :meth:`RequestQueue.submit` gives the call a :class:`concurrent.futures.Future` to wait on, or a
@@ -21,12 +22,11 @@ depth (10).
 """
 from __future__ import annotations
 
-import threading
-import time
 from concurrent.futures import Future
 from dataclasses import dataclass
+import threading
+import time
 from typing import Any, Callable
-
 
 ANSWER_GROUP = 8       # answers sent together
 GROUP_PAUSE = 0.02     # s between groups
@@ -74,7 +74,11 @@ class ScanMailbox:
 
     def wait_newer(self, seq: int, timeout: float | None,
                    stop: threading.Event) -> tuple[Any, int] | None:
-        """The newest scan once one with a number above ``seq`` arrived, None on timeout/stop."""
+        """
+        Return the newest scan once one with a number above ``seq`` arrived.
+
+        Returns None on timeout or when ``stop`` is set.
+        """
         with self._cv:
             ok = self._cv.wait_for(
                 lambda: (self._seq > seq and self._msg is not None) or stop.is_set(), timeout)
@@ -92,7 +96,8 @@ class _Call:
 
 
 class RequestQueue:
-    """Service calls waiting for the next scan, answered in batches by one worker thread.
+    """
+    Service calls waiting for the next scan, answered in batches by one worker thread.
 
     ``serve(scan_msg) -> Answer`` localizes one scan; ``no_scan(timeout) -> str`` words the
     answer for a call that saw no scan in time.
