@@ -18,6 +18,9 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
 import pytest
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
@@ -103,6 +106,7 @@ class Rig:
         self.scan_pub = ros.node.create_publisher(LaserScan, 'scan', qos_profile_sensor_data)
         self.relocalize_client = ros.node.create_client(Trigger, 'relocalize')
         self.empty_client = ros.node.create_client(Empty, 'global_localization')
+        self.setter = ros.node.create_client(SetParameters, 'global_localizer/set_parameters')
         self.poses = ros.collect(PoseWithCovarianceStamped, 'global_pose', LATCHED_QOS)
         self.initial = ros.collect(PoseWithCovarianceStamped, 'initialpose', 10)
         self.candidates = ros.collect(PoseArray, 'candidates', LATCHED_QOS)
@@ -120,6 +124,14 @@ class Rig:
             time.sleep(0.05)
         assert future.done(), 'service did not answer'
         return future.result()
+
+    def set_remote(self, name: str, value: int):
+        """Set an integer parameter over DDS (the node's set_parameters service)."""
+        req = SetParameters.Request(parameters=[ParameterMsg(name=name, value=ParameterValue(
+            type=ParameterType.PARAMETER_INTEGER, integer_value=value))])
+        res = self.ros.call(self.setter, req, 10.0)
+        assert res is not None, 'set_parameters did not answer'
+        return res.results[0]
 
     def relocalize(self, scan=None, timeout=30.0):
         return self.call(self.relocalize_client, Trigger.Request(), scan, timeout)
@@ -197,10 +209,17 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
     assert not res.success and 'inactive' in res.message
     assert len(rig.poses) == n
 
-    # cleanup, configure again (index kept? no: rebuilt from the latched map), shutdown
+    # configure-time parameters: refused while configured, taken while unconfigured
+    result = rig.set_remote('localizer.top_n', 3)
+    assert not result.successful and 'unconfigured' in result.reason
+    # cleanup, configure again (the index is rebuilt from the latched map), shutdown
     assert lc.change(Transition.TRANSITION_CLEANUP)
     assert lc.state() == 'unconfigured' and rig.node.map_state()[0] == 'no map'
+    assert rig.set_remote('localizer.top_n', 3).successful
+    result = rig.set_remote('localizer.top_n', 0)           # the core refuses it: so do we
+    assert not result.successful and 'top_n' in result.reason
     assert lc.change(Transition.TRANSITION_CONFIGURE) and rig.ready()
+    assert rig.node.localizer_config.top_n == 3
     assert lc.change(Transition.TRANSITION_ACTIVATE)
     res = rig.relocalize(scan0)
     assert res.success, res.message
