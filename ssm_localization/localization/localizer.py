@@ -143,8 +143,11 @@ def _same(a: Pose2, b: Pose2) -> bool:
 
 
 def _merged(ranked: list[Hypothesis], pose_of) -> list[Hypothesis]:
-    """``ranked`` without duplicates (the same pose within 5 cm and 0.02 rad): the first of each
-    stays and records the sources of the others in ``found_by``."""
+    """
+    ``ranked`` without duplicates (the same pose within 5 cm and 0.02 rad).
+
+    The first of each stays and records the sources of the others in ``found_by``.
+    """
     out: list[Hypothesis] = []
     for h in ranked:
         twin = next((o for o in out if _same(pose_of(h), pose_of(o))), None)
