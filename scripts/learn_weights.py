@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Learn the logistic weights w of eq. 4 (paper II.A) from generated matching problems.
+"""
+Learn the logistic weights w of eq. 4 (paper II.A) from generated matching problems.
 
 The paper learns ``G_ab = 1 / (1 + exp(-w^T g_ij(i', j')))`` as a logistic-regression classifier
 of pairs of correspondences. Training data (deterministic, ``--seed``):
@@ -33,8 +34,8 @@ Prints the weights and writes them to the YAML file; copy them into
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
+import sys
 
 import numpy as np
 
@@ -42,9 +43,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ssm_localization.bench.scanmatch import random_pose, synthetic_problem  # noqa: E402
+from ssm_localization.config import MatcherConfig  # noqa: E402
 from ssm_localization.io.carmen import read_carmen_log  # noqa: E402
 from ssm_localization.matching.descriptors import candidates  # noqa: E402
-from ssm_localization.config import MatcherConfig  # noqa: E402
 from ssm_localization.matching.features import prepare_scan  # noqa: E402
 from ssm_localization.transforms import apply, compose, inverse  # noqa: E402
 
@@ -144,7 +145,7 @@ def main(argv=None) -> int:
     acc = ((z > 0) == (y > 0))
     print(f'{len(y)} samples ({int(y.sum())} positive) from {args.log}')
     print(f'weights w = ({w[0]:.4g}, {w[1]:.4g}, {w[2]:.4g})  '
-          f'[1, (d_ij - d_i\'j\')^2 in m^2, (theta_ij - theta_i\'j\')^2 in rad^2]')
+          f"[1, (d_ij - d_i'j')^2 in m^2, (theta_ij - theta_i'j')^2 in rad^2]")
     print(f'accuracy: positives {acc[y > 0].mean():.3f}, negatives {acc[y == 0].mean():.3f}')
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(

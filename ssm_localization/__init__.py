@@ -1,4 +1,5 @@
-"""ssm_localization: single-scan global localization with spectral scan matching (Park & Park).
+"""
+ssm_localization: single-scan global localization with spectral scan matching (Park & Park).
 
 The public Python API is re-exported here; import it from ``ssm_localization`` (the module paths
 below it may change). Layers, each importing only the ones before it:
@@ -14,20 +15,20 @@ below it may change). Layers, each importing only the ones before it:
 __version__ = '0.1.0'
 
 from . import threads  # noqa: F401,I100 - first: sets the BLAS threads before numpy loads
-from .config import (IndexConfig, LocalizerConfig, MapBuildConfig, MatcherConfig,
-                     SimulationConfig, TopologyConfig, load_configs, load_index_config)
-from .evaluation.replay import ResultRow, replay_scans, summarize, write_results_csv
+from .config import (IndexConfig, load_configs, load_index_config, LocalizerConfig, MapBuildConfig,
+                     MatcherConfig, SimulationConfig, TopologyConfig)
+from .evaluation.replay import replay_scans, ResultRow, summarize, write_results_csv
 from .io.bag_reader import iter_scans, read_bag
 from .io.bag_records import BagData, BagError, ScanRecord
 from .io.bag_writer import write_bag
 from .io.carmen import convert_carmen, read_carmen_log
 from .io.simulate import simulate, simulate_bag
 from .localization.localizer import GlobalLocalizer, Localization
-from .mapping.index import MapIndex, build_index, load_index, save_index
-from .mapping.map_io import OccupancyMap, load_map_yaml, occupancy_map_from_msg, save_map_yaml
+from .mapping.index import build_index, load_index, MapIndex, save_index
+from .mapping.map_io import load_map_yaml, occupancy_map_from_msg, OccupancyMap, save_map_yaml
 from .mapping.topology import NodeKind
-from .matching.features import ScanFeatures, prepare_scan
-from .matching.matcher import MatchResult, match_features, match_scans
+from .matching.features import prepare_scan, ScanFeatures
+from .matching.matcher import match_features, match_scans, MatchResult
 
 __all__ = [
     '__version__',

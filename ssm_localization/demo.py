@@ -1,4 +1,5 @@
-"""``python -m ssm_localization.demo --out DIR`` (what ``make demo`` runs).
+"""
+``python -m ssm_localization.demo --out DIR`` (what ``make demo`` runs).
 
 1. Global localization of every scan of the bundled real bag ``bags/intel_queries`` (Intel
    Research Lab, map built from the log's even scans, queries = odd scans) on its own: prints
@@ -11,9 +12,9 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 

@@ -1,4 +1,5 @@
-"""Progress of long jobs (indexing a big map, building a map from a log, writing a bag).
+"""
+Progress of long jobs (indexing a big map, building a map from a log, writing a bag).
 
 The ROS-free core takes a ``progress(done, total, label)`` callback (:data:`ProgressCallback`);
 the command line draws it with tqdm through :class:`TqdmProgress`.
@@ -14,9 +15,13 @@ ProgressCallback = Callable[[int, int, str], None]
 
 
 class TqdmProgress:
-    """A :data:`ProgressCallback` drawn as a tqdm bar on stderr; a new ``label`` or ``total``
-    starts the bar over (a job reporting several stages). ``enabled=False`` draws nothing; nor
-    does a job that fails before its first report (its error stays the only line)."""
+    """
+    A :data:`ProgressCallback` drawn as a tqdm bar on stderr.
+
+    A new ``label`` or ``total`` starts the bar over (a job reporting several stages).
+    ``enabled=False`` draws nothing; nor does a job that fails before its first report (its error
+    stays the only line).
+    """
 
     def __init__(self, label: str = '', enabled: bool = True):
         self._label = label

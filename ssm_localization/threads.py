@@ -1,5 +1,7 @@
-"""One BLAS/OpenMP thread unless the user chose otherwise; imported first by the package, before
-numpy loads.
+"""
+One BLAS/OpenMP thread unless the user chose otherwise.
+
+Imported first by the package, before numpy loads.
 
 The package's matrix products are small (100 x 32 by 32 x 20000 at most). On a 2-core machine
 with other work on it, the worker threads of a multithreaded BLAS spin against the main thread

@@ -1,4 +1,5 @@
-"""Rigid 2-D transforms (SE(2)) as ``(x, y, yaw)`` triples and 3x3 matrices.
+"""
+Rigid 2-D transforms (SE(2)) as ``(x, y, yaw)`` triples and 3x3 matrices.
 
 Convention everywhere in the package: a pose ``T_a_b = (x, y, yaw)`` maps points from frame b
 into frame a: ``p_a = R(yaw) @ p_b + (x, y)``.
@@ -33,7 +34,7 @@ def from_matrix(m: np.ndarray) -> Pose2:
 
 
 def compose(a, b) -> Pose2:
-    """``a * b``: the pose of frame c in frame a, given ``a = T_a_b`` and ``b = T_b_c``."""
+    """Return ``a * b``: the pose of frame c in frame a, given ``a = T_a_b`` and ``b = T_b_c``."""
     ax, ay, ayaw = a
     bx, by, byaw = b
     c, s = np.cos(ayaw), np.sin(ayaw)

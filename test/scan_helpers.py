@@ -20,8 +20,12 @@ def segments(polys=ROOM) -> np.ndarray:
 
 
 def raycast(pose, n_beams=360, fov=2 * np.pi, max_range=30.0, polys=ROOM):
-    """Ranges (n_beams,) of a scanner at ``pose`` (x, y, yaw) in the room, counterclockwise from
-    ``-fov/2``; ``inf`` where nothing is hit. Returns (ranges, angle_min, angle_increment)."""
+    """
+    Ranges (n_beams,) of a scanner at ``pose``.
+
+    (x, y, yaw) in the room, counterclockwise from ``-fov/2``; ``inf`` where nothing is hit.
+    Returns (ranges, angle_min, angle_increment).
+    """
     segs = segments(polys)
     inc = fov / n_beams
     a_min = -fov / 2 if fov < 2 * np.pi else -np.pi

@@ -1,15 +1,17 @@
-"""io/bag_reader.py, io/bag_writer.py: rosbag2/mcap round trip, bare .mcap files, damaged bags,
-missing topics."""
+"""
+io/bag_reader.py, io/bag_writer.py.
+
+Rosbag2/mcap round trip, bare .mcap files, damaged bags, missing topics.
+"""
 import math
+from pathlib import Path
 import shutil
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-from ssm_localization import (BagError, OccupancyMap, ScanRecord, iter_scans, load_map_yaml,
-                              read_bag, write_bag)
+from ssm_localization import (BagError, iter_scans, load_map_yaml, OccupancyMap, read_bag,
+                              ScanRecord, write_bag)
 from ssm_localization.cli import main
 from ssm_localization.io.bag_reader import bag_topics
 
@@ -192,7 +194,6 @@ def test_committed_bags(name):
         assert not np.isnan(s.ranges).any() and np.all(s.ranges > 0)
     # frames agree: scan endpoints placed at /ground_truth land on the map's occupied cells
     from scipy.ndimage import distance_transform_edt
-
     from ssm_localization.transforms import apply
     dist = distance_transform_edt(~data.map.occupied_mask()) * data.map.resolution
     d = []

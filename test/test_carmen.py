@@ -1,11 +1,13 @@
-"""io/carmen.py and mapping/grid.py: parsing the shared CARMEN logs, map building, conversion to
-map + bag."""
+"""
+io/carmen.py and mapping/grid.py.
 
-import numpy as np
-import pytest
+Parsing the shared CARMEN logs, map building, conversion to map + bag.
+"""
 
 from conftest import shared_data
-from ssm_localization import MapBuildConfig, load_map_yaml, read_bag
+import numpy as np
+import pytest
+from ssm_localization import load_map_yaml, MapBuildConfig, read_bag
 from ssm_localization.io import carmen
 from ssm_localization.mapping.grid import build_occupancy_grid
 from ssm_localization.transforms import compose, inverse
@@ -83,8 +85,12 @@ def test_grid_of_a_synthetic_room():
 
 
 def test_intel_map_fits_odd_scans(intel):
-    """The map from the even scans is sharp: odd scans' endpoints land on its occupied cells,
-    and better with -pi/2 + i pi/n than with -pi/2 + i pi/(n-1)."""
+    """
+    The map from the even scans is sharp.
+
+    Odd scans' endpoints land on its occupied cells, and better with -pi/2 + i pi/n than with -pi/2
+    + i pi/(n-1).
+    """
     n = intel.ranges.shape[1]
     even, odd = carmen.select_scans(len(intel), 'even'), carmen.select_scans(len(intel), 'odd')
     fits = {}

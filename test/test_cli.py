@@ -4,13 +4,11 @@ from __future__ import annotations
 import csv
 import math
 
+from conftest import find_bag
 import numpy as np
 import pytest
-
 from ssm_localization import read_bag, save_map_yaml, write_bag
 from ssm_localization.cli import main
-
-from conftest import find_bag
 
 REQUIRED = ['stamp', 'x', 'y', 'yaw', 'status', 'latency_ms', 'node', 'score']
 

@@ -1,5 +1,8 @@
-"""The package builds with colcon like any ament_python package, and package.xml declares what
-the ROS adapters import."""
+"""
+The package builds with colcon like any ament_python package.
+
+package.xml declares what the ROS adapters import.
+"""
 from __future__ import annotations
 
 import ast
@@ -9,9 +12,8 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
-import pytest
-
 from conftest import REPO, venv_bin
+import pytest
 
 PKG = 'ssm_localization'
 
@@ -42,13 +44,29 @@ def test_colcon_build_installs_nodes_and_ament_index(tmp_path):
     assert (prefix / 'share/ament_index/resource_index/packages' / PKG).is_file()
     assert (prefix / 'share' / PKG / 'package.xml').is_file()
     assert (prefix / 'share' / PKG / 'config' / 'ssm_localization.yaml').is_file()
+    # launch files, the files they load, and the RViz config (see test_launch_files.py)
+    from test_launch_files import LaunchFile
+    share = prefix / 'share' / PKG
+    launch_files = sorted((REPO / 'launch').glob('*.launch.py'))
+    assert launch_files
+    for path in launch_files:
+        assert (share / 'launch' / path.name).is_file(), f'{path.name} is not installed'
+        for rel in LaunchFile(path).share_files():
+            assert (share / rel).is_file(), f'{rel} (loaded by {path.name}) is not installed'
+    assert (share / 'rviz' / 'ssm_localization.rviz').is_file()
     # the installed entry point resolves and runs (a bad parameter makes it exit at once)
     pytest.importorskip('rclpy', reason='rclpy is needed to run the installed node')
     site = next((prefix / 'lib').glob('python3*/site-packages'))
+    # the launch files' helper module comes with the installed package
+    helper = subprocess.run([sys.executable, '-c', 'import ssm_localization.ros.launch_support '
+                             'as m; print(m.__file__)'], env=dict(env, PYTHONPATH=str(site)),
+                            capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert helper.returncode == 0 and str(site) in helper.stdout, helper.stderr
     run = subprocess.run([str(prefix / 'lib' / PKG / 'global_localizer'), '--ros-args', '-p',
                           'mode:=sideways'], env=dict(env, PYTHONPATH=str(site)),
                          capture_output=True, text=True, timeout=60, cwd=tmp_path)
-    assert run.returncode == 2 and 'parameter mode must be one of' in run.stderr, run.stderr
+    assert run.returncode == 2 and 'mode must be one of' in run.stderr, run.stderr
+    assert 'Traceback' not in run.stderr
 
 
 def _ros_imports() -> set[str]:

@@ -5,7 +5,6 @@ import math
 
 import numpy as np
 import pytest
-
 from ssm_localization.localization.correlative import CorrelativeGrid
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
@@ -14,7 +13,7 @@ RES = 0.1
 
 
 def _rooms() -> OccupancyMap:
-    """A 6 m x 4 m walled area with an inner wall and a pillar: no symmetry."""
+    """Return a 6 m x 4 m walled area with an inner wall and a pillar: no symmetry."""
     d = np.zeros((40, 60), np.int8)
     d[:2, :] = d[-2:, :] = 100
     d[:, :2] = d[:, -2:] = 100

@@ -1,17 +1,19 @@
-"""files/: bounded reads, the alias-bomb-proof YAML loader, atomic outputs that leave nothing
-behind on failure."""
+"""
+files/: bounded reads.
+
+The alias-bomb-proof YAML loader, atomic outputs that leave nothing behind on failure.
+"""
 from __future__ import annotations
 
 import os
 
 import pytest
-import yaml
-
 from ssm_localization.files.reading import clip, echo, input_file, read_bounded
 from ssm_localization.files.writing import (atomic_dir, atomic_files, check_output_dir,
                                             check_output_file)
-from ssm_localization.files.yaml_input import (BoundedSafeLoader, YamlBombError, expanded_size,
-                                               load_yaml_file, parse_yaml)
+from ssm_localization.files.yaml_input import (BoundedSafeLoader, expanded_size, load_yaml_file,
+                                               parse_yaml, YamlBombError)
+import yaml
 
 
 def laughs(levels: int) -> str:

@@ -1,4 +1,5 @@
-"""Hostile input to the ``ssm_localization`` command line (issue 13, item 5).
+"""
+Hostile input to the ``ssm_localization`` command line (issue 13, item 5).
 
 Each case builds its hostile files in its own folder and runs the installed console script there
 as a real subprocess. Every case must end with exactly one line on stderr,
@@ -11,21 +12,20 @@ README ("Hostile input"), so the README shows what the suite really answers.
 """
 from __future__ import annotations
 
-import gzip
-import os
-import struct
-import subprocess
-import zipfile
-import zlib
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+import gzip
+import os
 from pathlib import Path
+import struct
+import subprocess
 from typing import Callable
-
-import numpy as np
-import pytest
+import zipfile
+import zlib
 
 from conftest import REPO, venv_bin
+import numpy as np
+import pytest
 
 README = REPO / 'README.md'
 TABLE_OUT = REPO / 'out' / 'hostile_cli.md'
@@ -39,7 +39,11 @@ MAP_YAML = 'image: room.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\nnegate: 
 # ------------------------------------------------------------------ hostile files, made cheaply
 
 def room_map(d: Path, name: str = 'room', yaml_text: str = MAP_YAML) -> str:
-    """A valid 64 x 64 map ``name.yaml`` + ``room.pgm`` (a walled room); returns the YAML name."""
+    """
+    Return a valid 64 x 64 map ``name.yaml`` + ``room.pgm`` (a walled room).
+
+    Returns the YAML name.
+    """
     img = np.full((64, 64), 254, np.uint8)
     img[:2, :] = img[-2:, :] = img[:, :2] = img[:, -2:] = 0
     (d / 'room.pgm').write_bytes(b'P5\n64 64\n255\n' + img.tobytes())
@@ -54,8 +58,11 @@ def map_with_image(d: Path, image: str) -> str:
 
 
 def sparse_pgm(path: Path, width: int, height: int) -> None:
-    """A PGM header declaring ``width x height`` pixels and a sparse file of that size: a huge
-    image that costs no disk and no time to make."""
+    """
+    Return a PGM header declaring ``width x height`` pixels and a sparse file of that size.
+
+    A huge image that costs no disk and no time to make.
+    """
     header = f'P5\n{width} {height}\n255\n'.encode()
     with open(path, 'wb') as fh:
         fh.write(header)
@@ -63,7 +70,7 @@ def sparse_pgm(path: Path, width: int, height: int) -> None:
 
 
 def tiny_png(path: Path, width: int, height: int) -> None:
-    """A PNG of a few bytes whose IHDR declares ``width x height`` pixels."""
+    """Return a PNG of a few bytes whose IHDR declares ``width x height`` pixels."""
     def chunk(kind: bytes, data: bytes) -> bytes:
         return (struct.pack('>I', len(data)) + kind + data
                 + struct.pack('>I', zlib.crc32(kind + data) & 0xffffffff))
@@ -73,7 +80,7 @@ def tiny_png(path: Path, width: int, height: int) -> None:
 
 
 def billion_laughs(levels: int = 9) -> str:
-    """The classic alias bomb: 9 levels of 9 aliases each, about 350 bytes."""
+    """Return the classic alias bomb: 9 levels of 9 aliases each, about 350 bytes."""
     lines = ['l0: &l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]']
     for i in range(1, levels):
         lines.append(f'l{i}: &l{i} [' + ', '.join([f'*l{i - 1}'] * 9) + ']')
@@ -81,7 +88,7 @@ def billion_laughs(levels: int = 9) -> str:
 
 
 def npz_declaring(path: Path, name: str, shape: tuple[int, ...]) -> None:
-    """An ``.npz`` whose member ``name`` declares ``shape`` (int8) but holds no data."""
+    """Return an ``.npz`` whose member ``name`` declares ``shape`` (int8) but holds no data."""
     with zipfile.ZipFile(path, 'w') as zf, zf.open(f'{name}.npy', 'w') as fh:
         np.lib.format.write_array_header_1_0(
             fh, {'descr': '|i1', 'fortran_order': False, 'shape': shape})
@@ -101,7 +108,7 @@ def carmen_log(path: Path) -> None:
 class Case:
     """One hostile input: ``make(folder)`` writes its files and returns the command line."""
 
-    input: str                               # what the case feeds the CLI (the table's column)
+    input: str  # noqa: A003 - what the case feeds the CLI (the table's column)
     make: Callable[[Path], list[str]]
     expect: tuple[str, ...]                  # the error line must contain each of these
 
@@ -284,7 +291,8 @@ CASES: list[Case] = [
     Case('convert-carmen `--resolution 1e-5` (a grid of 8e11 cells)',
          lambda d: _carmen(d, '--resolution', '1e-5'), ('grid at resolution 1e-05', 'exceeds')),
     Case('convert-carmen `-o` naming a regular file',
-         lambda d: _write(d, 'out', 'x') and _carmen(d), ('output directory out', 'not a directory')),
+         lambda d: _write(d, 'out', 'x') and _carmen(d),
+         ('output directory out', 'not a directory')),
     Case('simulate `-o` under a regular file',
          lambda d: ['simulate', room_map(d), '-o', f'{_write(d, "file", "x")}/bag'],
          ('bag file/bag', 'not a directory')),
@@ -314,7 +322,7 @@ class Outcome:
         return self.lines[-1] if self.lines else '(no error line)'
 
     def problems(self) -> list[str]:
-        """What breaks the rules (empty: the case passes)."""
+        """Return what breaks the rules (empty: the case passes)."""
         out = []
         command = self.argv[0]
         if self.returncode != 2:
@@ -336,8 +344,12 @@ class Outcome:
 
 
 def snapshot(folder: Path) -> dict[str, int]:
-    """Every path under ``folder``: directories, and files with their size and mtime (what a
-    failed command may not add, remove or change)."""
+    """
+    Every path under ``folder``.
+
+    Directories, and files with their size and mtime (what a failed command may not add, remove or
+    change).
+    """
     return {str(p.relative_to(folder)): -1 if p.is_dir() else hash((p.stat().st_size,
                                                                    p.stat().st_mtime_ns))
             for p in sorted(folder.rglob('*'))}
@@ -364,9 +376,9 @@ def outcomes(tmp_path_factory) -> dict[str, Outcome]:
 
 
 def table(outcomes: dict[str, Outcome]) -> str:
-    """The markdown table (input, answer, verdict) of the suite."""
-    rows = ['| input | answer (stderr; exit status 2 unless the verdict says otherwise) | verdict |',
-            '| --- | --- | --- |']
+    """Return the suite's markdown table: input, answer, verdict."""
+    rows = ['| input | answer (stderr; exit status 2 unless the verdict says otherwise) '
+            '| verdict |', '| --- | --- | --- |']
     for c in CASES:
         o = outcomes[c.input]
         verdict = '; '.join(o.problems()) or 'pass'

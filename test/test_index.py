@@ -3,16 +3,15 @@ from __future__ import annotations
 
 import argparse
 import math
-import zipfile
 from pathlib import Path
-
-import numpy as np
-import pytest
+import zipfile
 
 from conftest import shared_data
-from ssm_localization import (IndexConfig, OccupancyMap, TopologyConfig, build_index,
-                              load_index, load_index_config, load_map_yaml, save_index,
-                              save_map_yaml)
+import numpy as np
+import pytest
+from ssm_localization import (build_index, IndexConfig, load_index, load_index_config,
+                              load_map_yaml, OccupancyMap, save_index, save_map_yaml,
+                              TopologyConfig)
 from ssm_localization.config import config_from_json, config_to_json
 from ssm_localization.mapping.index import FORMAT_VERSION
 from ssm_localization.mapping.raycast import cast_rays

@@ -1,14 +1,17 @@
-"""The package's import graph (built with ``ast``, nothing is imported): layers, no cycles, ROS only
-in ``ros/``, few function-level imports. Each check also runs on a deliberately broken package."""
+"""
+The package's import graph (built with ``ast``, nothing is imported).
+
+Layers, no cycles, ROS only in ``ros/``, few function-level imports. Each check also runs on a
+deliberately broken package.
+"""
 from __future__ import annotations
 
 import ast
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import pytest
-
 from conftest import REPO
+import pytest
 
 PKG = 'ssm_localization'
 NODE_MODULES = {f'{PKG}.ros.global_localizer', f'{PKG}.ros.map_indexer', f'{PKG}.ros.play'}
@@ -48,7 +51,11 @@ class Graph:
     imports: list[Import] = field(default_factory=list)
 
     def own(self, function_level: bool | None = None) -> dict[str, set[str]]:
-        """``{module: {own modules it imports}}`` (module- and function-level by default)."""
+        """
+        Return ``{module: {own modules it imports}}``.
+
+        Module- and function-level imports by default.
+        """
         edges: dict[str, set[str]] = {m: set() for m in self.modules}
         for imp in self.imports:
             if imp.target in self.modules and (function_level is None
@@ -63,7 +70,11 @@ def module_name(root: Path, path: Path) -> str:
 
 
 def build_graph(root: Path) -> Graph:
-    """Every import statement of the package under ``root`` (a directory named like the package)."""
+    """
+    Return every import statement of the package under ``root``.
+
+    ``root`` is a directory named like the package.
+    """
     files = {module_name(root, p): p for p in sorted(root.rglob('*.py'))}
     graph = Graph(set(files))
     for mod, path in files.items():

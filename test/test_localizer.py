@@ -1,23 +1,24 @@
-"""localization/localizer.py: vicinity score (eq. 10), the stages (pose votes, spectral coarse
-ranking, correlative search, refinement), frames, the status policy and bad input."""
+"""
+localization/localizer.py: vicinity score, stages, frames, status policy, bad input.
+
+The vicinity score (eq. 10), the stages (pose votes, spectral coarse ranking, correlative search,
+refinement), frames, the status policy and bad input.
+"""
 from __future__ import annotations
 
 import math
 
+from conftest import BAGS
 import numpy as np
 import pytest
-
-from ssm_localization import (GlobalLocalizer, IndexConfig, Localization, LocalizerConfig,
-                              SimulationConfig, build_index, prepare_scan, read_bag, simulate)
-from ssm_localization.localization.localizer import (STATUSES, Hypothesis, verdict,
-                                                    vicinity_score)
+from ssm_localization import (build_index, GlobalLocalizer, IndexConfig, Localization,
+                              LocalizerConfig, read_bag, simulate, SimulationConfig)
+from ssm_localization.localization.localizer import Hypothesis, STATUSES, verdict, vicinity_score
 from ssm_localization.localization.verify import BeamCheck
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
 from ssm_localization.matching.scan import ranges_to_points
 from ssm_localization.transforms import wrap_angle
-
-from conftest import BAGS
 
 OFFSET = (0.25, -0.12, 0.6)      # a laser mounted off-centre and turned on the base
 
@@ -264,7 +265,7 @@ def test_base_covariance_is_propagated_through_the_lever_arm(depot):
 # --------------------------------------------------------------------------- statuses
 
 def _corridor() -> OccupancyMap:
-    """A 40 m x 2.4 m corridor, closed at both ends, 0.05 m cells."""
+    """Return a 40 m x 2.4 m corridor, closed at both ends, 0.05 m cells."""
     d = np.zeros((52, 804), np.int8)
     d[:2, :] = d[-2:, :] = 100
     d[:, :2] = d[:, -2:] = 100
@@ -322,7 +323,11 @@ def test_verdict_status_policy():
 
 
 def _identical_rooms(n: int = 5, size: float = 3.0, res: float = 0.05) -> OccupancyMap:
-    """An n x n block of identical square rooms, each with the same door and the same table."""
+    """
+    Return an n x n block of identical square rooms.
+
+    Each with the same door and the same table.
+    """
     cells = int(round(size / res))
     d = np.zeros((n * cells + 2, n * cells + 2), np.int8)
     for i in range(n + 1):
@@ -343,8 +348,11 @@ def rooms():
 
 
 def test_identical_rooms_are_never_a_confident_answer(rooms):
-    """Places that look the same are ambiguous even when they are not all among the first
-    hypotheses: the correlative search over the whole map finds the twins."""
+    """
+    Places that look the same are ambiguous even when they are not all among the first hypotheses.
+
+    The correlative search over the whole map finds the twins.
+    """
     occ, loc = rooms
     sim = simulate(occ, SimulationConfig(count=4, seed=3))
     for scan, truth in zip(sim.scans, sim.poses):
@@ -366,8 +374,11 @@ def test_a_scan_of_another_building_is_not_ok(rooms):
 
 
 def test_float32_and_float64_map_metadata_give_the_same_answers(depot):
-    """A map over the wire (float32 resolution and origin) and from a YAML file (decimals) is one
-    map: the same cells, the same checksum, the same nodes and the same answers."""
+    """
+    A map over the wire (float32 resolution and origin) and from a YAML file (decimals) is one map.
+
+    The same cells, the same checksum, the same nodes and the same answers.
+    """
     bag, _ = depot
     occ = bag.map
     wire = OccupancyMap(occ.data, float(np.float32(occ.resolution)),

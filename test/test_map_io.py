@@ -5,12 +5,11 @@ import math
 from pathlib import Path
 from types import SimpleNamespace
 
-import numpy as np
-import pytest
-from PIL import Image
-
 from conftest import shared_data
-from ssm_localization.mapping.map_io import (OccupancyMap, load_map_yaml, occupancy_map_from_msg,
+import numpy as np
+from PIL import Image
+import pytest
+from ssm_localization.mapping.map_io import (load_map_yaml, occupancy_map_from_msg, OccupancyMap,
                                              save_map_yaml)
 
 SHARED_MAPS = ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room')
@@ -193,7 +192,7 @@ def test_from_msg_bad_length():
 
 def test_from_rosbags_message():
     pytest.importorskip('rosbags')
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
     ts = get_typestore(Stores.ROS2_JAZZY)
     Grid = ts.types['nav_msgs/msg/OccupancyGrid']
     Header = ts.types['std_msgs/msg/Header']

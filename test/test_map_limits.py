@@ -1,26 +1,27 @@
-"""The map-size guard (mapping/map_limits.py) wherever a map enters, image headers read before
-decoding, and the core writers leaving nothing behind on failure."""
+"""
+The map-size guard.
+
+(mapping/map_limits.py) wherever a map enters, image headers read before decoding, and the core
+writers leaving nothing behind on failure.
+"""
 from __future__ import annotations
 
 import os
 import struct
+from types import SimpleNamespace
 import zipfile
 import zlib
-from types import SimpleNamespace
 
+from conftest import synthetic_map
 import numpy as np
 import pytest
-
-from ssm_localization import (MapBuildConfig, OccupancyMap, ScanRecord, build_index, load_index,
-                              load_map_yaml, occupancy_map_from_msg, read_bag, save_index,
-                              save_map_yaml, write_bag, write_results_csv)
+from ssm_localization import (build_index, load_index, load_map_yaml, MapBuildConfig,
+                              occupancy_map_from_msg, OccupancyMap, read_bag, save_index,
+                              save_map_yaml, ScanRecord, write_bag, write_results_csv)
 from ssm_localization.evaluation.replay import ResultRow
 from ssm_localization.mapping import grid
 from ssm_localization.mapping.map_image import header_size
-from ssm_localization.mapping.map_limits import (MAX_MAP_CELLS, MapTooLargeError,
-                                                 check_map_cells)
-
-from conftest import synthetic_map
+from ssm_localization.mapping.map_limits import check_map_cells, MapTooLargeError, MAX_MAP_CELLS
 
 
 def _png_header(path, width, height):

@@ -3,10 +3,9 @@ from __future__ import annotations
 
 import argparse
 
+from conftest import shared_data
 import numpy as np
 import pytest
-
-from conftest import shared_data
 from scan_helpers import room_scan
 from ssm_localization.transforms import apply, inverse
 

@@ -3,12 +3,11 @@ from __future__ import annotations
 
 import math
 
+from conftest import shared_data
 import numpy as np
 import pytest
-
-from conftest import shared_data
 from scan_helpers import pose_error, room_scan
-from ssm_localization import (MatcherConfig, MatchResult, match_features, match_scans,
+from ssm_localization import (match_features, match_scans, MatcherConfig, MatchResult,
                               prepare_scan, read_carmen_log)
 from ssm_localization.matching.matcher import spectral_score
 from ssm_localization.matching.ransac import (icp_point_to_line, procrustes, ransac_pose,

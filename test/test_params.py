@@ -1,5 +1,8 @@
-"""config/: dataclasses from YAML (flat files, ROS params files, dotted keys), strict keys, the
-``param`` help of every field."""
+"""
+config/: dataclasses from YAML.
+
+Flat files, ROS params files, dotted keys; strict keys; the ``param`` help of every field.
+"""
 from __future__ import annotations
 
 import dataclasses
@@ -7,12 +10,11 @@ import math
 from pathlib import Path
 
 import pytest
-import yaml
-
-from ssm_localization.config import (LEARNED_WEIGHTS, IndexConfig, LocalizerConfig,
-                                     MapBuildConfig, MatcherConfig, SimulationConfig,
-                                     TopologyConfig, flatten, from_dict, load_configs, unflatten)
+from ssm_localization.config import (flatten, from_dict, IndexConfig, LEARNED_WEIGHTS,
+                                     load_configs, LocalizerConfig, MapBuildConfig, MatcherConfig,
+                                     SimulationConfig, TopologyConfig, unflatten)
 from ssm_localization.config.fields import help_of
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -6,7 +6,6 @@ import time
 
 import numpy as np
 import pytest
-
 from ssm_localization.mapping.raycast import beam_angles, cast_rays
 
 RES = 0.05

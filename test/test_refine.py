@@ -1,19 +1,20 @@
-"""localization/refine.py, verify.py: wall-surface signed distance (exact on its half-cell
-lattice, interpolated between), Gauss-Newton pose refinement with the wall offset estimated,
-ray-cast beam check."""
+"""
+localization/refine.py, verify.py.
+
+Wall-surface signed distance (exact on its half-cell lattice, interpolated between), Gauss-Newton
+pose refinement with the wall offset estimated, ray-cast beam check.
+"""
 from __future__ import annotations
 
 import math
 
+from conftest import BAGS
 import numpy as np
 import pytest
-
-from ssm_localization import SimulationConfig, simulate
-from ssm_localization.localization.refine import SurfaceModel, refine_pose, refine_poses
+from ssm_localization import simulate, SimulationConfig
+from ssm_localization.localization.refine import refine_pose, refine_poses, SurfaceModel
 from ssm_localization.localization.verify import BeamCheck, check_beams
 from ssm_localization.transforms import rotation, wrap_angle
-
-from conftest import BAGS
 
 RES = 0.1
 
@@ -26,8 +27,12 @@ def _block_grid() -> np.ndarray:
 
 
 def _brute_signed_distance(occ: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """Reference: distance (grid units) from grid-frame points to the union of occupied boxes
-    (positive outside) or to the union of free boxes (negative inside), by brute force."""
+    """
+    Return Reference: distance.
+
+    (grid units) from grid-frame points to the union of occupied boxes (positive outside) or to the
+    union of free boxes (negative inside), by brute force.
+    """
     rows, cols = np.nonzero(occ)
     frows, fcols = np.nonzero(~occ)
     out = np.empty(len(g))

@@ -1,19 +1,19 @@
-"""evaluation/replay.py: end-to-end replay of the committed bags, summary arithmetic, stamps,
-RESULTS.csv."""
+"""
+evaluation/replay.py.
+
+End-to-end replay of the committed bags, summary arithmetic, stamps, RESULTS.csv.
+"""
 from __future__ import annotations
 
 import csv
 import math
 
+from conftest import find_bag
 import numpy as np
 import pytest
-
-from ssm_localization import (GlobalLocalizer, Localization, LocalizerConfig, build_index,
-                              read_bag)
-from ssm_localization.evaluation.replay import (ResultRow, match_truth, replay_scans,
-                                                summarize, write_results_csv)
-
-from conftest import find_bag
+from ssm_localization import build_index, GlobalLocalizer, Localization, LocalizerConfig, read_bag
+from ssm_localization.evaluation.replay import (match_truth, replay_scans, ResultRow, summarize,
+                                                write_results_csv)
 
 REQUIRED = ['stamp', 'x', 'y', 'yaw', 'status', 'latency_ms', 'node', 'score']
 

@@ -4,19 +4,14 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
+from conftest import shared_data
 import numpy as np
 import pytest
-
-from conftest import RCLPY_SKIP_REASON, shared_data
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from sensor_msgs.msg import LaserScan  # noqa: E402
-from visualization_msgs.msg import Marker  # noqa: E402
-
-from ssm_localization import occupancy_map_from_msg  # noqa: E402
-from ssm_localization.ros import conversions as conv  # noqa: E402
-from ssm_localization.ros import markers  # noqa: E402
+from sensor_msgs.msg import LaserScan
+from ssm_localization import occupancy_map_from_msg
+from ssm_localization.ros import conversions as conv
+from ssm_localization.ros import markers
+from visualization_msgs.msg import Marker
 
 pytestmark = pytest.mark.ros
 
@@ -51,7 +46,7 @@ def test_scan_points_drop_invalid():
 
 
 def test_map_round_trip():
-    from ssm_localization.mapping.map_io import OccupancyMap, load_map_yaml
+    from ssm_localization.mapping.map_io import load_map_yaml, OccupancyMap
     occ = load_map_yaml(shared_data('maps', 'depot.yaml'))
     grid = conv.occupancy_grid_from_map(occ, 3.5)
     assert (grid.info.width, grid.info.height) == (occ.width, occ.height)

@@ -1,31 +1,30 @@
-"""End to end over real DDS: the installed ``global_localizer`` console script started like
-``ros2 run`` (``--ros-args --params-file config/ssm_localization.yaml``), a bag published by
-``ssm_localization play``, the ``relocalize`` service called from the test, poses checked against
-the bag's /ground_truth. Includes a kidnapping: a second, distant scan after a first fix.
+"""
+End to end over real DDS.
+
+The installed ``global_localizer`` console script started like ``ros2 run`` (``--ros-args
+--params-file config/ssm_localization.yaml``), a bag published by ``ssm_localization play``, the
+``relocalize`` service called from the test, poses checked against the bag's /ground_truth.
+Includes a kidnapping: a second, distant scan after a first fix.
 """
 from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 import signal
 import subprocess
 import time
-from pathlib import Path
 
+from conftest import find_bag, REPO, venv_bin
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from lifecycle_msgs.srv import GetState
 import numpy as np
 import pytest
-
-from conftest import RCLPY_SKIP_REASON, REPO, find_bag, venv_bin
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from geometry_msgs.msg import PoseWithCovarianceStamped  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
-from visualization_msgs.msg import MarkerArray  # noqa: E402
-
-from ssm_localization.ros.conversions import pose_from_msg, stamp_to_sec  # noqa: E402
-from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
-from ssm_localization.transforms import wrap_angle  # noqa: E402
+from ssm_localization.ros.conversions import pose_from_msg, stamp_to_sec
+from ssm_localization.ros.qos import LATCHED_QOS
+from ssm_localization.transforms import wrap_angle
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -70,6 +69,16 @@ def _relocalize(ros, client, timeout: float = 60.0):
     return ros.call(client, Trigger.Request(), timeout)
 
 
+def _wait_active(ros, node: str = 'global_localizer', timeout: float = 30.0) -> bool:
+    """Wait until the lifecycle node (autostart) reports ``active`` on NODE/get_state."""
+    client = ros.node.create_client(GetState, f'{node}/get_state')
+
+    def active() -> bool:
+        res = ros.call(client, GetState.Request(), 5.0)
+        return res is not None and res.current_state.label == 'active'
+    return bool(ros.wait_for(active, timeout, 0.2))
+
+
 def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
     from ssm_localization import read_bag
     bag = find_bag('depot_sim')
@@ -84,6 +93,7 @@ def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
         marks = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
         client = ros.node.create_client(Trigger, 'relocalize')
         assert client.wait_for_service(timeout_sec=20.0), node_log.read_text()
+        assert _wait_active(ros), node_log.read_text()
 
         # before any map: a clear failure
         res = _relocalize(ros, client, 20.0)
@@ -125,8 +135,12 @@ def test_global_localizer_process_relocalize_and_kidnapping(ros, tmp_path):
 
 
 def test_map_indexer_process_writes_index_that_global_localizer_loads(ros, tmp_path):
-    """map_indexer indexes the bag's map into a file; global_localizer starts from that file
-    (no map topic needed) and relocalizes a scan played from the bag."""
+    """
+    map_indexer indexes the bag's map into a file.
+
+    Global_localizer starts from that file (no map topic needed) and relocalizes a scan played from
+    the bag.
+    """
     from ssm_localization import load_index, read_bag
     bag = find_bag('depot_sim')
     data = read_bag(bag)
@@ -155,6 +169,7 @@ def test_map_indexer_process_writes_index_that_global_localizer_loads(ros, tmp_p
         procs.append(_play_one_scan(bag, data, k, tmp_path / 'play_scan.log'))
         client = ros.node.create_client(Trigger, 'relocalize')
         assert client.wait_for_service(timeout_sec=20.0), localizer.text()
+        assert _wait_active(ros), localizer.text()
         res = None
         for _ in range(60):                     # until the index file is loaded
             res = _relocalize(ros, client)

@@ -4,26 +4,21 @@ from __future__ import annotations
 import math
 import time
 
+from conftest import find_bag, synthetic_map
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import OccupancyGrid
 import numpy as np
 import pytest
-
-from conftest import RCLPY_SKIP_REASON, find_bag, synthetic_map
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from geometry_msgs.msg import PoseWithCovarianceStamped  # noqa: E402
-from nav_msgs.msg import OccupancyGrid  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import qos_profile_sensor_data  # noqa: E402
-from sensor_msgs.msg import LaserScan  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
-from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
-
-from ssm_localization.ros.conversions import (laser_scan_from_record,  # noqa: E402
-                                              occupancy_grid_from_map, pose_from_msg,
-                                              stamp_to_sec)
-from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
-from ssm_localization.transforms import wrap_angle  # noqa: E402
+from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import LaserScan
+from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
+                                              pose_from_msg, stamp_to_sec)
+from ssm_localization.ros.lifecycle import state_label
+from ssm_localization.ros.qos import LATCHED_QOS
+from ssm_localization.transforms import wrap_angle
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
 
 pytestmark = pytest.mark.ros
 
@@ -40,7 +35,7 @@ def _has_nodes(arr: MarkerArray) -> bool:
 
 
 def _simulated(occ, count: int = 6, seed: int = 3):
-    from ssm_localization import SimulationConfig, simulate
+    from ssm_localization import simulate, SimulationConfig
     return simulate(occ, SimulationConfig(count=count, seed=seed, clearance=0.4,
                                           noise_sigma=0.005, stamp0=100.0))
 
@@ -64,6 +59,15 @@ class Localizer:
         self.client = ros.node.create_client(Trigger, 'relocalize')
         self.poses = ros.collect(PoseWithCovarianceStamped, 'global_pose', LATCHED_QOS)
         self.markers = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
+        assert ros.wait_for(lambda: state_label(self.node) == 'active', 10), 'not autostarted'
+
+    def served(self):
+        """Return the localizer the node serves now (None before the first index)."""
+        served = self.node.source.served
+        return served.localizer if served is not None else None
+
+    def busy(self) -> bool:
+        return self.node.map_state()[0] == 'indexing'
 
     def publish_map(self, occ_or_grid) -> None:
         grid = occ_or_grid if isinstance(occ_or_grid, OccupancyGrid) \
@@ -71,9 +75,8 @@ class Localizer:
         self.map_pub.publish(grid)
 
     def wait_ready(self, timeout: float = 120.0) -> bool:
-        def ready():
-            return self.node._localizer is not None and not self.node.builder.busy
-        return bool(self.ros.wait_for(ready, timeout, 0.05))
+        return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout,
+                                      0.05))
 
     def relocalize(self, scan: LaserScan | None, timeout: float = 30.0):
         """Call relocalize; publish ``scan`` every 50 ms until the answer arrives."""
@@ -89,8 +92,12 @@ class Localizer:
         return future.result()
 
     def new_pose(self, timeout: float = 5.0):
-        """The pose published by the last successful relocalize: the service answer and the
-        topic message travel separately, so wait (bounded) for the message to arrive."""
+        """
+        Return the pose published by the last successful relocalize.
+
+        The service answer and the topic message travel separately, so wait (bounded) for the
+        message to arrive.
+        """
         assert self.ros.wait_for(lambda: len(self.poses) > self.n_poses_before, timeout), \
             'no global_pose after relocalize'
         return self.poses[-1]
@@ -127,7 +134,8 @@ def test_map_indexer_markers_index_file_and_newest_map_wins(ros, tmp_path):
     for occ in maps:
         pub.publish(occupancy_grid_from_map(occ))
         time.sleep(0.05)
-    assert ros.wait_for(lambda: node.index is not None and not node.builder.busy
+    assert ros.wait_for(lambda: node.index is not None and node.builder is not None
+                        and not node.builder.busy
                         and np.array_equal(node.index.map.data, maps[-1].data), 120)
     assert ros.wait_for(lambda: np.array_equal(load_index(index_file).map.data, maps[-1].data),
                         10)
@@ -154,7 +162,8 @@ def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
     pub.publish(occupancy_grid_from_map(first))
     assert ros.wait_for(lambda: started, 10)
     pub.publish(occupancy_grid_from_map(second))
-    assert ros.wait_for(lambda: node.index is not None and not node.builder.busy, 60)
+    assert ros.wait_for(lambda: node.index is not None and node.builder is not None
+                        and not node.builder.busy, 60)
     assert np.array_equal(node.index.map.data, second.data)
     assert len(started) == 2
     assert 'dropped, a newer map arrived' in capfd.readouterr().err
@@ -169,7 +178,7 @@ def test_map_indexer_ignores_bad_maps(ros):
     pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
     pub.publish(occupancy_grid_from_map(OccupancyMap(np.full((50, 50), 100, np.int8), 0.05)))
     time.sleep(0.5)
-    assert node.index is None and not node.builder.busy
+    assert node.index is None and node.builder is not None and not node.builder.busy
 
 
 # ---------------------------------------------------------------------------- global_localizer
@@ -187,8 +196,8 @@ def test_localizer_service_bad_input_and_kidnapping(ros, capfd):
     sim = _simulated(occ, count=8)
     loc = Localizer(ros, scan_timeout=1.0)
     loc.publish_map(occ)
-    assert ros.wait_for(lambda: loc.node.builder.busy or loc.node._localizer is not None, 10)
-    if loc.node.builder.busy:   # answered while indexing, not blocked behind it
+    assert ros.wait_for(lambda: loc.busy() or loc.served() is not None, 10)
+    if loc.busy():   # answered while indexing, not blocked behind it
         t0 = time.monotonic()
         res = loc.relocalize(None)
         assert not res.success and 'indexing in progress' in res.message
@@ -204,12 +213,17 @@ def test_localizer_service_bad_input_and_kidnapping(ros, capfd):
     # bad scans over the wire: each is refused with a reason, the node keeps serving
     good = laser_scan_from_record(sim.scans[0])
     bad = []
-    empty = LaserScan(); empty.header = good.header; bad.append(empty)
-    nan = laser_scan_from_record(sim.scans[0]); nan.ranges = [math.nan] * len(good.ranges)
+    empty = LaserScan()
+    empty.header = good.header
+    bad.append(empty)
+    nan = laser_scan_from_record(sim.scans[0])
+    nan.ranges = [math.nan] * len(good.ranges)
     bad.append(nan)
-    inf = laser_scan_from_record(sim.scans[0]); inf.ranges = [math.inf] * len(good.ranges)
+    inf = laser_scan_from_record(sim.scans[0])
+    inf.ranges = [math.inf] * len(good.ranges)
     bad.append(inf)
-    zero = laser_scan_from_record(sim.scans[0]); zero.angle_increment = 0.0
+    zero = laser_scan_from_record(sim.scans[0])
+    zero.angle_increment = 0.0
     bad.append(zero)
     capfd.readouterr()
     for scan in bad:
@@ -266,7 +280,7 @@ def test_service_answers_while_indexing(ros, monkeypatch):
     monkeypatch.setattr(global_localizer, 'build_index', slow_build)
     loc = Localizer(ros)
     loc.publish_map(synthetic_map(0))
-    assert ros.wait_for(lambda: loc.node.builder.busy, 10)
+    assert ros.wait_for(loc.busy, 10)
     t0 = time.monotonic()
     res = loc.relocalize(None, timeout=10)
     assert not res.success and 'indexing in progress' in res.message, res.message
@@ -282,7 +296,7 @@ def test_localizer_survives_bad_maps_and_reindexes_new_map(ros, capfd):
     initial = ros.collect(PoseWithCovarianceStamped, 'initialpose', 10)
     loc.publish_map(occ)
     assert loc.wait_ready()
-    first_localizer = loc.node._localizer
+    first_localizer = loc.served()
 
     # no free space, malformed, absurdly large: warnings, the current index stays
     loc.publish_map(OccupancyMap(np.full((60, 60), 100, np.int8), 0.05))
@@ -297,7 +311,7 @@ def test_localizer_survives_bad_maps_and_reindexes_new_map(ros, capfd):
     walled[4:8, 4:8] = 0                       # free cells, but no room for a single node
     loc.publish_map(OccupancyMap(walled, 0.05))
     assert ros.wait_for(lambda: 'indexing failed' in capfd.readouterr().err, 10)
-    assert loc.node._localizer is first_localizer and not loc.node.builder.busy
+    assert loc.served() is first_localizer and not loc.busy()
     res = loc.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message
     assert loc.new_pose().header.frame_id == 'world'
@@ -307,10 +321,10 @@ def test_localizer_survives_bad_maps_and_reindexes_new_map(ros, capfd):
     # the same map again: no re-indexing; a changed map: a new localizer swapped in
     loc.publish_map(occ)
     time.sleep(0.3)
-    assert loc.node._localizer is first_localizer and not loc.node.builder.busy
+    assert loc.served() is first_localizer and not loc.busy()
     changed = synthetic_map(2)
     loc.publish_map(changed)
-    assert ros.wait_for(lambda: loc.node._localizer is not first_localizer, 120)
+    assert ros.wait_for(lambda: loc.served() is not first_localizer, 120)
     assert loc.wait_ready()
     sim2 = _simulated(changed, count=1, seed=5)
     res = loc.relocalize(laser_scan_from_record(sim2.scans[0]))
@@ -326,9 +340,11 @@ def test_index_file_is_saved_then_loaded_without_a_map(ros, tmp_path):
     first.publish_map(occ)
     assert first.wait_ready() and ros.wait_for(index_file.exists, 10)
     ros.remove(first.node)
-    second = Localizer(ros, index_file=str(index_file))    # present: no map subscription
+    second = Localizer(ros, index_file=str(index_file))    # present: loaded, not rebuilt
     assert second.wait_ready()
-    assert not any(s.topic_name == '/map' for s in second.node.subscriptions)
+    assert second.node.source.served.source == f'index file {index_file}'
+    time.sleep(0.3)      # the same map is still latched on /map: compared, kept
+    assert second.node.source.served.source == f'index file {index_file}' and not second.busy()
     res = second.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message
     assert _close(pose_from_msg(second.new_pose().pose.pose), sim.poses[0])

@@ -1,15 +1,17 @@
-"""config/ssm_localization.yaml and docs/PARAMETERS.md against the parameters the nodes declare,
-and --params-file."""
+"""
+Check the generated params file and docs against the declared parameters.
+
+config/ssm_localization.yaml and docs/PARAMETERS.md against the parameters the nodes declare, and
+--params-file.
+"""
 from __future__ import annotations
 
+from conftest import REPO
 import pytest
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.lifecycle import TransitionCallbackReturn
 import yaml
-
-from conftest import RCLPY_SKIP_REASON, REPO
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-import rclpy  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
@@ -106,8 +108,9 @@ def test_params_file_overrides_reach_the_core_configs(ros_domain, tmp_path):
     path = tmp_path / 'params.yaml'
     path.write_text(yaml.safe_dump(doc))
     ctx, node = _make(GlobalLocalizerNode, ['--ros-args', '--params-file', str(path),
-                                            '-p', 'rate:=4.0'])
+                                            '-p', 'rate:=4.0', '-p', 'autostart:=false'])
     try:
+        assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS   # reads them
         assert node.mode == 'continuous' and node.rate == 4.0
         assert node.get_parameter('scan_timeout').value == 2.5
         assert node.localizer_config.top_n == 3 and node.localizer_config.sigma_d == 0.08
@@ -124,8 +127,10 @@ def test_ros_node_and_cli_read_the_same_file_alike(ros_domain):
     from ssm_localization.config.params import load_configs
     from ssm_localization.ros.global_localizer import GlobalLocalizerNode
     index_cfg, loc_cfg = load_configs(PARAMS, 'global_localizer')
-    ctx, node = _make(GlobalLocalizerNode, ['--ros-args', '--params-file', str(PARAMS)])
+    ctx, node = _make(GlobalLocalizerNode, ['--ros-args', '--params-file', str(PARAMS),
+                                            '-p', 'autostart:=false'])
     try:
+        assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
         assert node.index_config == index_cfg and node.localizer_config == loc_cfg
     finally:
         _close(ctx, node)
@@ -133,5 +138,5 @@ def test_ros_node_and_cli_read_the_same_file_alike(ros_domain):
 
 def test_bad_parameter_value_is_refused(ros_domain):
     from ssm_localization.ros.global_localizer import GlobalLocalizerNode
-    with pytest.raises(ValueError, match='mode'):
+    with pytest.raises(ParameterException, match='mode must be one of on_demand, continuous'):
         _make(GlobalLocalizerNode, ['--ros-args', '-p', 'mode:=sideways'])

@@ -4,21 +4,16 @@ from __future__ import annotations
 import argparse
 import time
 
+from conftest import find_bag
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import OccupancyGrid, Odometry
 import numpy as np
 import pytest
-
-from conftest import RCLPY_SKIP_REASON, find_bag
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from geometry_msgs.msg import PoseStamped  # noqa: E402
-from nav_msgs.msg import OccupancyGrid, Odometry  # noqa: E402
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data  # noqa: E402
-from sensor_msgs.msg import LaserScan  # noqa: E402
-
-from ssm_localization.ros.conversions import stamp_to_sec  # noqa: E402
-from ssm_localization.ros.qos import LATCHED_QOS  # noqa: E402
-from ssm_localization.ros.play import BagPlayer, timeline  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
+from ssm_localization.ros.conversions import stamp_to_sec
+from ssm_localization.ros.play import BagPlayer, timeline
+from ssm_localization.ros.qos import LATCHED_QOS
 
 pytestmark = pytest.mark.ros
 

@@ -3,13 +3,7 @@ from __future__ import annotations
 
 import os
 
-import pytest
-
-from conftest import RCLPY_SKIP_REASON
-
-pytest.importorskip('rclpy', reason=RCLPY_SKIP_REASON)
-
-from ssm_localization.ros.soak import Sample, report, rss_mb  # noqa: E402
+from ssm_localization.ros.soak import report, rss_mb, Sample
 
 
 def _samples(rss):

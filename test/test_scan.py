@@ -3,11 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from scan_helpers import room_scan
-from ssm_localization.matching.descriptors import candidates, shape_context
 from ssm_localization import MatcherConfig
-from ssm_localization.matching.features import ScanFeatures, prepare_scan
+from ssm_localization.matching.descriptors import candidates, shape_context
+from ssm_localization.matching.features import prepare_scan, ScanFeatures
 from ssm_localization.matching.pairwise import (affinity_matrix, angle_table, deformation,
                                                 distance_table, potential)
 from ssm_localization.matching.scan import (as_points, downsample_even, local_normals,

@@ -1,18 +1,17 @@
 """io/simulate.py: simulated scans agree with ray casting, clutter, field of view, determinism."""
 import math
 
+from conftest import shared_data
 import numpy as np
 import pytest
-
-from conftest import shared_data
-from ssm_localization import (OccupancyMap, SimulationConfig, load_map_yaml, read_bag, simulate,
-                              simulate_bag)
+from ssm_localization import (load_map_yaml, OccupancyMap, read_bag, simulate, simulate_bag,
+                              SimulationConfig)
 from ssm_localization.io.simulate import sample_free_poses
 from ssm_localization.mapping.raycast import cast_rays
 
 
 def _room():
-    """A 10 m x 6 m room with a pillar, 0.05 m cells."""
+    """Return a 10 m x 6 m room with a pillar, 0.05 m cells."""
     data = np.zeros((120, 200), dtype=np.int8)
     data[:2, :] = data[-2:, :] = 100
     data[:, :2] = data[:, -2:] = 100
@@ -97,7 +96,7 @@ def test_sensor_offset(room):
 
 
 def test_bad_config(room):
-    for bad in (dict(fov_deg=0.0), dict(count=0), dict(short_fraction=2.0), dict(beams=1)):
+    for bad in ({'fov_deg': 0.0}, {'count': 0}, {'short_fraction': 2.0}, {'beams': 1}):
         with pytest.raises(ValueError):
             simulate(room, SimulationConfig(**bad))
 

@@ -1,9 +1,8 @@
 """conftest.shared_data / find_bag: missing test data skips a test, except under CI (CI=true)."""
 from __future__ import annotations
 
+from conftest import find_bag, SHARED_DATA, shared_data
 import pytest
-
-from conftest import SHARED_DATA, find_bag, shared_data
 
 
 def test_missing_data_skips_locally(monkeypatch):

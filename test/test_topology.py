@@ -1,12 +1,11 @@
 """topology: brushfire, GVD and nodes on maps with a known answer (paper section III)."""
 from __future__ import annotations
 
+from conftest import shared_data
 import numpy as np
 import pytest
-
-from conftest import shared_data
-from ssm_localization import OccupancyMap, TopologyConfig, load_map_yaml
-from ssm_localization.mapping.topology import NODE_KIND_NAMES, NodeKind, build_topology
+from ssm_localization import load_map_yaml, OccupancyMap, TopologyConfig
+from ssm_localization.mapping.topology import build_topology, NODE_KIND_NAMES, NodeKind
 
 RES = 0.05
 ONLY_BRANCHES = TopologyConfig(dead_end_nodes=False, region_nodes=False, arc_spacing=0.0)
@@ -175,8 +174,12 @@ def test_corridor_widths_and_resolutions(res, width):
 
 @pytest.mark.parametrize('name', ['depot', 'turtlebot3_world'])
 def test_a_resolution_off_in_its_8th_digit_gives_the_same_nodes(name):
-    """Lengths are compared in cells with the settings rounded once: no comparison flips when the
-    resolution changes by far less than a cell (issue: the float32 resolution of a message)."""
+    """
+    Lengths are compared in cells with the settings rounded once.
+
+    No comparison flips when the resolution changes by far less than a cell (issue: the float32
+    resolution of a message).
+    """
     occ = load_map_yaml(shared_data('maps', f'{name}.yaml'))
     base = build_topology(occ)
     for factor in (1.0 + 3e-7, 1.0 - 3e-7):

@@ -1,18 +1,15 @@
-"""localization/voting.py: pooled map features, pose votes, their peaks, wall-direction
-alignment."""
+"""localization/voting.py: pooled map features, pose votes, peaks, wall-direction alignment."""
 from __future__ import annotations
 
 import math
 
+from conftest import BAGS
 import numpy as np
 import pytest
-
 from ssm_localization import build_index, prepare_scan, read_bag
-from ssm_localization.localization.voting import PoseVoting, alignment_yaws
+from ssm_localization.localization.voting import alignment_yaws, PoseVoting
 from ssm_localization.matching.scan import ranges_to_points
 from ssm_localization.transforms import wrap_angle
-
-from conftest import BAGS
 
 
 @pytest.fixture(scope='module')
@@ -69,8 +66,8 @@ def test_alignment_yaws_recover_a_rotation():
     """A Manhattan map and a scan of two walls turned by 25 deg: 25 deg (mod 90) aligns them."""
     rng = np.random.default_rng(0)
     map_dirs = np.concatenate((rng.normal(0.0, 0.01, 300), rng.normal(math.pi / 2, 0.01, 200)))
-    scan_dirs = np.concatenate((rng.normal(-0.2, 0.01, 60), rng.normal(-0.2 + math.pi / 2,
-                                                                         0.01, 40)))
+    scan_dirs = np.concatenate((rng.normal(-0.2, 0.01, 60),
+                                rng.normal(-0.2 + math.pi / 2, 0.01, 40)))
     hist = np.histogram(np.mod(map_dirs, math.pi), bins=180, range=(0, math.pi))[0].astype(float)
     hist = hist + 0.5 * (np.roll(hist, 1) + np.roll(hist, -1))
     yaws = alignment_yaws(hist / hist.sum(), scan_dirs, None, 2)

@@ -1,4 +1,5 @@
-"""``ssm_localization bench index``: index build time and peak memory per map.
+"""
+``ssm_localization bench index``: index build time and peak memory per map.
 
 Every map is indexed in a fresh subprocess (``python -m ssm_localization.bench.index --worker
 SPEC``) so that its peak RSS is honest; the table shows the build wall time, the peak RSS of the
@@ -13,25 +14,26 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 import resource
 import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
 from ..io.carmen import build_map, read_carmen_log
 from ..mapping.index import build_index
-from ..mapping.map_io import OccupancyMap, load_map_yaml, save_map_yaml
+from ..mapping.map_io import load_map_yaml, OccupancyMap, save_map_yaml
 
 SHARED = Path(__file__).resolve().parents[3] / 'shared' / 'data'
 TARGETS = {'depot': (1.0, None), 'turtlebot3_world': (1.0, None), 'office': (10.0, 1024.0)}
 
 
 def office_map(size: float = 100.0, resolution: float = 0.05, seed: int = 0):
-    """A deterministic synthetic office: corridors, blocks of rooms with doors, furniture, halls.
+    """
+    Return a deterministic synthetic office (corridors, rooms with doors, furniture, halls).
 
     ``size`` x ``size`` metres at ``resolution`` (default 2000 x 2000 cells), frame ``map``,
     origin (0, 0, 0). Walls are 0.15 m thick, corridors 2.4 m wide, doors 1 m wide.
@@ -107,8 +109,12 @@ def _load(spec: str):
 
 
 def _rss_kb(field: str) -> float:
-    """VmRSS / VmHWM (kB) of this process from /proc (ru_maxrss where /proc is missing; note
-    that ru_maxrss can carry the parent's peak over fork + exec)."""
+    """
+    Read VmRSS / VmHWM (kB) of this process from /proc.
+
+    ru_maxrss where /proc is missing; note that ru_maxrss can carry the parent's peak over fork +
+    exec.
+    """
     try:
         for line in Path('/proc/self/status').read_text().splitlines():
             if line.startswith(field + ':'):

@@ -1,4 +1,5 @@
-"""``ssm_localization bench localize``: global localization figures per data set.
+"""
+``ssm_localization bench localize``: global localization figures per data set.
 
 Data sets (``--sets``):
 - ``depot``, ``tb3_sandbox``, ``turtlebot3_world``: the paper protocol (section V.B): random poses
@@ -21,25 +22,25 @@ with the ratios the issue asks for.
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 import dataclasses
 import math
-import time
-from collections import Counter
 from pathlib import Path
+import time
 
 import numpy as np
 
+from .peer import ExhaustiveLocalizer
 from ..config.params import load_configs
 from ..config.simulation import SimulationConfig
 from ..evaluation.plotting import plot_replay
-from ..evaluation.replay import SUCCESS_XY, SUCCESS_YAW, ResultRow, summarize
+from ..evaluation.replay import ResultRow, SUCCESS_XY, SUCCESS_YAW, summarize
 from ..io.carmen import build_map, log_scan_records, read_carmen_log
 from ..io.simulate import simulate
 from ..localization.localizer import GlobalLocalizer, Localization
 from ..mapping.index import build_index
 from ..mapping.map_io import load_map_yaml, save_map_yaml
 from ..transforms import Pose2, wrap_angle
-from .peer import ExhaustiveLocalizer
 
 CLUTTER = {'clutter': 8, 'short_fraction': 0.05}
 SIM_SETS = {
@@ -89,7 +90,11 @@ def _sim_queries(grid, n: int, seed: int, extra: dict):
 
 
 def real_map(data: Path, work: Path, name: str):
-    """The CARMEN log ``name`` and the map of its even-numbered scans (cached in ``work``)."""
+    """
+    Return the CARMEN log ``name`` and the map of its even-numbered scans.
+
+    The map is cached in ``work``.
+    """
     log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
     map_yaml = work / f'{name}_even.yaml'
     if map_yaml.exists():
@@ -117,7 +122,8 @@ def _right(pose, truth: Pose2) -> bool:
 
 
 def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> str | None:
-    """Where a scan not answered right was lost (None when it was answered right).
+    """
+    Where a scan not answered right was lost (None when it was answered right).
 
     Stages, first that applies: no hypothesis near the truth at all; lost in refinement; refined
     but not among the verified; ranked below a wrong pose; right but refused (ambiguous: a rival /
@@ -144,7 +150,7 @@ def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> s
 
 
 def _coverage(cov: np.ndarray, pose: Pose2, truth: Pose2) -> bool:
-    """The position error lies inside the 2-sigma ellipse of the reported covariance."""
+    """Return the position error lies inside the 2-sigma ellipse of the reported covariance."""
     e = np.array(pose[:2]) - np.array(truth[:2])
     try:
         return float(e @ np.linalg.solve(np.asarray(cov)[:2, :2], e)) <= 4.0

@@ -1,4 +1,5 @@
-"""The reference peer of ``bench localize --peer``: exhaustive correlative search.
+"""
+The reference peer of ``bench localize --peer``: exhaustive correlative search.
 
 What Cartographer does to relocalize, written with the same numpy building blocks as the package
 (``localization/correlative.py``): every yaw of a full turn at 1 degree, every free cell, by branch
@@ -9,15 +10,15 @@ with the localizer: no descriptors, no voting, no spectral matching.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..localization.correlative import CorrelativeGrid
-from ..localization.localizer import Hypothesis, Localization, distinct
-from ..localization.refine import SurfaceModel, refine_poses
+from ..localization.localizer import distinct, Hypothesis, Localization
+from ..localization.refine import refine_poses, SurfaceModel
 from ..mapping.index import MapIndex
 from ..matching.scan import downsample_even, ranges_to_points
 

@@ -1,4 +1,5 @@
-"""``ssm_localization bench scanmatch``: spectral scan matching accuracy on real CARMEN scans.
+"""
+``ssm_localization bench scanmatch``: spectral scan matching accuracy on real CARMEN scans.
 
 Protocols (paper V.A): Table 2 (noise 10 mm, 60 swapped-x/y outliers, random pose +-400 mm /
 +-30 deg), Fig. 4 (success / matching rate vs noise with 72 outliers and vs outlier ratio at 5 mm),
@@ -8,9 +9,9 @@ tentative correspondences L vs k, learned vs hand-set weights of eq. 4, and the 
 from __future__ import annotations
 
 import argparse
-import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+import time
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -70,8 +71,11 @@ def random_pose(rng, max_xy=0.4, max_yaw=np.deg2rad(30.0)):
 
 
 def synthetic_problem(ref: np.ndarray, rng, sigma: float, n_out: int):
-    """Paper V.A: noise, then ``n_out`` outliers (x and y swapped), then a random pose.
-    Returns ``(new_xy, truth, outlier_mask)`` with ``p_ref = R(truth) p_new + t``."""
+    """
+    Paper V.A: noise, then ``n_out`` outliers (x and y swapped), then a random pose.
+
+    Returns ``(new_xy, truth, outlier_mask)`` with ``p_ref = R(truth) p_new + t``.
+    """
     new = ref + rng.normal(0.0, sigma, ref.shape)
     out = np.zeros(len(ref), dtype=bool)
     if n_out > 0:
@@ -142,8 +146,11 @@ def true_overlap(ref_xy, new_xy, truth, dist=0.2) -> float:
 
 
 def real_pairs(log, rng, config, step, n_pairs):
-    """Scans k and k+step with the truth from the corrected poses, plus a random offset.
-    Also reports the success over the pairs that truly overlap by at least 50 %."""
+    """
+    Return scans k and k+step with the truth from the corrected poses, plus a random offset.
+
+    Also reports the success over the pairs that truly overlap by at least 50 %.
+    """
     ks = rng.choice(len(log) - step, n_pairs, replace=False)
     out, ovs = [], []
     for k in ks:
@@ -192,9 +199,9 @@ def run(args: argparse.Namespace) -> int:
 
     if 'table2' in only:
         print(f'\n== Table 2: sigma 10 mm, 60 outliers, pose +-400 mm / +-30 deg, '
-              f'{args.trials} trials (errors in mm / deg over successes; success < 50 mm & < 1 deg;'
-              f' ms = median wall time per match incl. prepare_scan of both scans, cpu ms = '
-              f'median process CPU time)')
+              f'{args.trials} trials (errors in mm / deg over successes; success < 50 mm & '
+              f'< 1 deg; ms = median wall time per match incl. prepare_scan of both scans, '
+              f'cpu ms = median process CPU time)')
         print(T2_HEAD)
         print(f'{"paper SSM (362 pts)":<24} {0.10:7.2f} {10.40:6.2f} {-0.30:7.2f} {7.09:6.2f} '
               f'{0.02:7.3f} {0.10:6.3f}')
@@ -210,7 +217,8 @@ def run(args: argparse.Namespace) -> int:
         for name, ref in refs.items():
             cells = []
             for sg in sigmas:
-                s = table2(ref, np.random.default_rng(args.seed + 1), cfg, args.fig4_trials, sg, 72)
+                s = table2(ref, np.random.default_rng(args.seed + 1), cfg, args.fig4_trials, sg,
+                           72)
                 cells.append(f'{s["success"]:5.0f}/{s["rate"]:5.1f}')
             print(f'{name:<32} ' + ' '.join(f'{c:>11}' for c in cells))
         print('(b) sigma 5 mm, outliers/inliers: ' + ' '.join(f'{r:>11.1f}' for r in ratios))

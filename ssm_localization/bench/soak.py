@@ -1,6 +1,10 @@
-"""``ssm_localization bench soak``: memory and pose rate of ``global_localizer`` in continuous
-mode on a looping bag (issue 13's soak). The driver lives in ``ros/soak.py``; only this command
-needs rclpy, so it is imported when the command runs."""
+"""
+``ssm_localization bench soak``.
+
+Memory and pose rate of ``global_localizer`` in continuous mode on a looping bag (issue 13's soak).
+The driver lives in ``ros/soak.py``; only this command needs rclpy, so it is imported when the
+command runs.
+"""
 from __future__ import annotations
 
 import argparse
@@ -27,6 +31,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..ros.soak import soak   # rclpy only for this command: the rest of the CLI is ROS-free
+    from ..ros.soak import soak  # rclpy only for this command: the rest of the CLI is ROS-free
     return soak(args.bag, args.minutes, args.rate, args.sample, args.warmup,
                 params=tuple(args.param), plot=args.plot)

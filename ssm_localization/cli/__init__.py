@@ -1,4 +1,5 @@
-"""The ``ssm_localization`` command line: one console script, one module per subcommand.
+"""
+The ``ssm_localization`` command line: one console script, one module per subcommand.
 
 Each subcommand module exposes ``add_arguments(parser)`` and ``run(args) -> int``. Only
 ``play`` needs ROS (rclpy is imported when it runs) and only ``--plot`` needs matplotlib.
@@ -13,9 +14,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from . import bench_cmd, carmen_cmd, index_cmd, match_cmd, play_cmd, replay_cmd, simulate_cmd
 from ..files.reading import clip
-from . import (bench_cmd, carmen_cmd, index_cmd, match_cmd, play_cmd, replay_cmd,
-               simulate_cmd)
 
 #: longest error line printed (messages that echo input are clipped where they are made too)
 MAX_ERROR_CHARS = 600
@@ -33,8 +33,11 @@ COMMANDS = {
 
 
 class Parser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose usage errors are one line (``PROG: error: ...``, status 2);
-    ``--help`` still shows the usage. Subcommand parsers are of this class too."""
+    """
+    An ``ArgumentParser`` whose usage errors are one line (``PROG: error: ...``, status 2).
+
+    ``--help`` still shows the usage. Subcommand parsers are of this class too.
+    """
 
     def error(self, message: str):
         self.exit(2, f'{self.prog}: error: {clip(message, MAX_ERROR_CHARS)} '

@@ -1,5 +1,9 @@
-"""Argument types and options shared by the subcommands: numbers are checked where they are
-parsed, so a NaN resolution or a negative count is a one-line usage error, never a crash later."""
+"""
+Argument types and options shared by the subcommands.
+
+Numbers are checked where they are parsed, so a NaN resolution or a negative count is a one-line
+usage error, never a crash later.
+"""
 from __future__ import annotations
 
 import argparse

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import argparse
 
+from .arguments import add_max_map_cells, nonnegative_int, positive_float, positive_int
 from ..config.mapping import MapBuildConfig
 from ..io.carmen import convert_carmen
 from ..progress import TqdmProgress
-from .arguments import add_max_map_cells, nonnegative_int, positive_float, positive_int
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -4,13 +4,13 @@ from __future__ import annotations
 import argparse
 import time
 
+from .arguments import add_max_map_cells
 from ..config.params import load_index_config
 from ..evaluation.plotting import check_plot_path, plot_index
 from ..files.writing import check_output_file
 from ..mapping.index import build_index, save_index
 from ..mapping.map_io import load_map_yaml
 from ..progress import TqdmProgress
-from .arguments import add_max_map_cells
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

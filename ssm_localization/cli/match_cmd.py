@@ -1,20 +1,24 @@
-"""``ssm_localization match LOG.gz --k 100 --s 3 [--plot out.png]``: match two scans of a CARMEN
-log (scan k as reference, scan k+s as new), print the estimate against the corrected poses."""
+"""
+``ssm_localization match LOG.gz --k 100 --s 3 [--plot out.png]``.
+
+Match two scans of a CARMEN log (scan k as reference, scan k+s as new), print the estimate against
+the corrected poses.
+"""
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import time
 from pathlib import Path
+import time
 
 import numpy as np
 
+from .arguments import finite_float, nonnegative_int, positive_int
 from ..config.matcher import MatcherConfig
 from ..evaluation.plotting import check_plot_path, plot_match
 from ..io.carmen import read_carmen_log
 from ..matching.matcher import match_scans
 from ..transforms import apply, compose, inverse, wrap_angle
-from .arguments import finite_float, nonnegative_int, positive_int
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

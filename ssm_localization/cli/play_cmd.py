@@ -30,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..ros.play import play_bag    # rclpy only when playing: the rest of the CLI is ROS-free
+    from ..ros.play import play_bag  # rclpy only when playing: the rest of the CLI is ROS-free
     ros_args = ['--ros-args', *args.ros_args] if args.ros_args else None
     return play_bag(args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
                     scan_topic=args.scan_topic, start_offset=args.start_offset,

@@ -1,9 +1,14 @@
-"""``ssm_localization replay BAG -o RESULTS.csv``: single-scan localization of every scan of a bag."""
+"""
+``ssm_localization replay BAG -o RESULTS.csv``.
+
+Single-scan localization of every scan of a bag.
+"""
 from __future__ import annotations
 
 import argparse
 import time
 
+from .arguments import add_max_map_cells, nonnegative_int
 from ..config.params import load_configs
 from ..evaluation.plotting import check_plot_path, plot_replay
 from ..evaluation.replay import replay_scans, summarize, write_results_csv
@@ -13,7 +18,6 @@ from ..localization.localizer import GlobalLocalizer
 from ..mapping.index import build_index, load_index
 from ..mapping.map_io import load_map_yaml
 from ..progress import TqdmProgress
-from .arguments import add_max_map_cells, nonnegative_int
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

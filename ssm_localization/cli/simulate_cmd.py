@@ -3,13 +3,13 @@ from __future__ import annotations
 
 import argparse
 
+from .arguments import (add_max_map_cells, finite_float, fraction, nonnegative_float,
+                        nonnegative_int, positive_float, positive_int)
 from ..config.simulation import SimulationConfig
 from ..files.writing import check_output_dir
 from ..io.simulate import simulate_bag
 from ..mapping.map_io import load_map_yaml
 from ..progress import TqdmProgress
-from .arguments import (add_max_map_cells, finite_float, fraction, nonnegative_float,
-                        nonnegative_int, positive_float, positive_int)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,5 +1,9 @@
-"""``param``: a dataclass field with its description, the one source of every config field's help
-(ROS parameter descriptions, the generated params file, docs/PARAMETERS.md)."""
+"""
+``param``: a dataclass field with its description.
+
+The one source of every config field's help: the ROS parameter descriptions, the generated params
+file and docs/PARAMETERS.md.
+"""
 from __future__ import annotations
 
 import dataclasses

@@ -1,15 +1,16 @@
 """Localizer settings (paper section IV and what v2 adds around it)."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 from .fields import param
 
 
 @dataclass(frozen=True)
 class LocalizerConfig:
-    """Parameters of the localizer (the matcher's own come from the index it was built with).
+    """
+    Parameters of the localizer (the matcher's own come from the index it was built with).
 
     Lengths in metres, angles in radians. See ``localization/localizer.py`` for the pipeline.
     """
@@ -43,8 +44,8 @@ class LocalizerConfig:
     search_cell: float = param(0.05, 'cell size of the search, metres (rounded to a whole number '
                                      'of map cells, at least one)')
     search_points: int = param(60, 'scan points (of the spatially even set) the search scores')
-    search_alignments: int = param(2, 'further seed yaws from aligning the scan\'s wall '
-                                      'directions with the map\'s')
+    search_alignments: int = param(2, "further seed yaws from aligning the scan's wall "
+                                      "directions with the map's")
     search_budget: float = param(0.2, 'seconds after which the search stops with what it has')
     # -- refinement on the wall surface
     refine_hypotheses: int = param(8, 'hypotheses refined on the wall surface (best by '
@@ -85,7 +86,7 @@ class LocalizerConfig:
                                           'direction: ambiguous (2 sigma beyond the 0.5 m '
                                           'success tolerance: a corridor too bare to tell), m')
     covariance_scale: float = param(100.0, 'Gauss-Newton covariance multiplier (neighbouring '
-                                          'residuals are correlated)')
+                                           'residuals are correlated)')
     min_position_std: float = param(0.035, 'floor of the reported position std, metres')
     min_yaw_std: float = param(math.radians(0.5), 'floor of the reported yaw std, rad')
     min_points: int = param(10, 'fewer valid beams than this: failed')
@@ -101,8 +102,9 @@ class LocalizerConfig:
     def __post_init__(self) -> None:
         positive = ('vote_neighbours', 'vote_bin_xy', 'vote_bin_yaw', 'vote_peaks', 'top_n',
                     'fine_ransac_iterations', 'search_seeds', 'search_step', 'search_keep',
-                    'search_depth', 'search_sigma', 'search_cell', 'search_budget', 'search_points', 'verify_beams', 'refine_hypotheses',
-                    'verify_hypotheses', 'max_cast_range', 'surface_depth_std', 'beam_tolerance', 'score_sigma',
+                    'search_depth', 'search_sigma', 'search_cell', 'search_budget', 'search_points',
+                    'verify_beams', 'refine_hypotheses', 'verify_hypotheses', 'max_cast_range',
+                    'surface_depth_std', 'beam_tolerance', 'score_sigma',
                     'distinct_xy', 'distinct_yaw', 'max_position_std', 'covariance_scale',
                     'sigma_d')
         for name in positive:
@@ -110,8 +112,10 @@ class LocalizerConfig:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f'LocalizerConfig.{name} must be a finite number > 0, '
                                  f'got {value!r}')
-        for name in ('vote_descriptor_dims', 'search_spread', 'search_alignments', 'refine_iterations', 'polish_iterations', 'surface_depth', 'search_min_score',
-                     'contradiction_weight', 'max_contradicting', 'min_score', 'verify_margin', 'ambiguity_margin',
+        for name in ('vote_descriptor_dims', 'search_spread', 'search_alignments',
+                     'refine_iterations', 'polish_iterations', 'surface_depth', 'search_min_score',
+                     'contradiction_weight', 'max_contradicting', 'min_score', 'verify_margin',
+                     'ambiguity_margin',
                      'min_position_std', 'min_yaw_std', 'min_points'):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):

@@ -1,8 +1,8 @@
 """Map-side settings (paper section III): GVD topology, the index, occupancy-grid building."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 from .fields import param
 from .matcher import MatcherConfig
@@ -54,7 +54,8 @@ class IndexConfig:
     topology: TopologyConfig = param(
         help='GVD and node selection (TopologyConfig)', default_factory=TopologyConfig)
     beams: int = param(360, 'beams of each virtual scan taken at a topological node (full turn)')
-    max_range: float = param(20.0, 'range of the virtual laser when casting the node scans, metres')
+    max_range: float = param(
+        20.0, 'range of the virtual laser when casting the node scans, metres')
     sensor_pose: tuple[float, float, float] = param(
         (0.0, 0.0, 0.0),
         "the laser's pose on the robot (x, y, yaw; Table 1: x_sens, y_sens, theta_sens); the "
@@ -88,7 +89,8 @@ class MapBuildConfig:
 
     resolution: float = param(0.05, 'cell size of the map, metres')
     margin: float = param(1.0, 'unknown border around the observed area, metres')
-    max_range: float = param(40.0, 'finite readings beyond this (metres) only clear space up to it')
+    max_range: float = param(
+        40.0, 'finite readings beyond this (metres) only clear space up to it')
     free_cap: float = param(5.0, 'no-return beams clear space up to this distance, metres')
     occupied_ratio: float = param(0.3, 'occupied if hits >= ratio * (hits + misses)')
     min_hits: int = param(1, 'a cell with fewer hits is never occupied')

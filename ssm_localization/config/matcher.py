@@ -65,7 +65,8 @@ class MatcherConfig:
     polish_iterations: int = param(1, 'least-squares polish iterations')
     # retries on the next spectral cluster when the pose explains too little (beyond the paper)
     retries: int = param(
-        1, 'retries on the next spectral cluster when the pose explains too little of the new scan')
+        1,
+        'retries on the next spectral cluster when the pose explains too little of the new scan')
     retry_overlap: float = param(0.6, 'fraction of new ICP points within overlap_dist')
     overlap_dist: float = param(
         0.1, 'a new point closer than this to the reference counts as overlapping, metres')

@@ -1,4 +1,5 @@
-"""Config dataclasses from YAML parameter files (a ``yaml.SafeLoader`` subclass only).
+"""
+Config dataclasses from YAML parameter files (a ``yaml.SafeLoader`` subclass only).
 
 One file serves the CLI and the ROS nodes: either a plain mapping, or a ROS 2 params file whose
 ``<node>: ros__parameters:`` section is used. Nested mappings follow the dataclass nesting, e.g.::
@@ -18,21 +19,24 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import typing
 from pathlib import Path
+import typing
 from typing import Any, TypeVar
 
-from ..files.reading import echo
-from ..files.yaml_input import load_yaml_file
 from .localization import LocalizerConfig
 from .mapping import IndexConfig, TopologyConfig
+from ..files.reading import echo
+from ..files.yaml_input import load_yaml_file
 
 T = TypeVar('T')
 
 
 def load_yaml_mapping(path: str | Path) -> dict:
-    """The top-level mapping of a params file (``{}`` for an empty file); ``ValueError`` naming
-    the file for anything else, ``FileNotFoundError`` when it is missing."""
+    """
+    Return the top-level mapping of a params file (``{}`` for an empty file).
+
+    ``ValueError`` naming the file for anything else, ``FileNotFoundError`` when it is missing.
+    """
     data = load_yaml_file(path, 'params file')
     if data is None:
         return {}
@@ -52,7 +56,11 @@ def _mapping(value: Any, name: str) -> dict:
 
 
 def node_section(data: dict, node: str) -> dict:
-    """The parameters for ``node`` from a ROS params file, or ``data`` itself if it is flat."""
+    """
+    Return the parameters for ``node`` from a ROS params file.
+
+    A flat mapping (no ``ros__parameters`` section) is returned as it is.
+    """
     for key in (node, '/' + node, '/**', '**'):
         section = data.get(key)
         if isinstance(section, dict) and 'ros__parameters' in section:
@@ -79,7 +87,7 @@ def unflatten(flat: dict[str, Any]) -> dict:
 
 
 def flatten(obj: Any, prefix: str = '') -> dict[str, Any]:
-    """A dataclass instance as ``{'dotted.name': value}`` (tuples become lists)."""
+    """Return a dataclass instance as ``{'dotted.name': value}`` (tuples become lists)."""
     out: dict[str, Any] = {}
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
@@ -117,7 +125,11 @@ def from_dict(cls: type[T], data: dict | None, where: str = '') -> T:
 
 
 def config_to_json(config: Any) -> str:
-    """A config dataclass as JSON of its dotted field names (how an index file stores it)."""
+    """
+    Return a config dataclass as JSON of its dotted field names.
+
+    This is how an index file stores the config it was built with.
+    """
     return json.dumps(flatten(config), sort_keys=True)
 
 
@@ -159,7 +171,11 @@ def _coerce(value: Any, default: Any, hint: Any, name: str) -> Any:
 
 
 def laser_pose_of_section(section: dict) -> tuple[float, float, float] | None:
-    """The nodes' ``laser_x/laser_y/laser_yaw`` parameters as a pose, None when none is set."""
+    """
+    Return the nodes' ``laser_x/laser_y/laser_yaw`` parameters as a pose.
+
+    Returns None when none of them is set.
+    """
     names = ('laser_x', 'laser_y', 'laser_yaw')
     values = [section.get(k) for k in names]
     if all(v is None for v in values):
@@ -201,7 +217,8 @@ def load_configs(path: str | Path | None, node: str = 'global_localizer'):
 
 
 def load_index_config(path: str | Path) -> IndexConfig:
-    """:class:`IndexConfig` from a YAML params file (see :func:`load_yaml_mapping`).
+    """
+    :class:`IndexConfig` from a YAML params file (see :func:`load_yaml_mapping`).
 
     Accepts a flat mapping of IndexConfig / TopologyConfig field names (nested ``topology:`` and
     ``matcher:`` mappings allowed), a ROS params file ``map_indexer: ros__parameters: {...}``

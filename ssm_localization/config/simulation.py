@@ -1,8 +1,8 @@
 """Settings of the simulated query scans."""
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 from .fields import param
 

@@ -1,4 +1,5 @@
-"""Figures people would rather see than read (PNG via matplotlib, imported on first use).
+"""
+Figures people would rather see than read (PNG via matplotlib, imported on first use).
 
 Figures are written atomically (nothing is left behind when saving fails); callers check the
 path first with :func:`check_plot_path`, before the work that the figure shows.
@@ -37,7 +38,11 @@ def _save(plt, fig, path: str | Path, dpi: int) -> Path:
 
 
 def _pyplot():
-    """matplotlib's pyplot on the Agg backend (matplotlib is optional: imported here only)."""
+    """
+    Import matplotlib's pyplot on the Agg backend.
+
+    matplotlib is optional: it is imported here only.
+    """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -45,7 +50,11 @@ def _pyplot():
 
 
 def _map_figure(grid, width: float, extra_height: float):
-    """A figure showing ``grid`` (OccupancyMap) in map coordinates: ``(plt, fig, ax, extent)``."""
+    """
+    Return a figure showing ``grid`` (OccupancyMap) in map coordinates.
+
+    ``(plt, fig, ax, extent)``.
+    """
     plt = _pyplot()
     h, w = grid.data.shape
     ox, oy, _ = grid.origin
@@ -65,7 +74,8 @@ def plot_replay(index, rows, path, title: str = '') -> None:
     colors = {'ok': 'tab:green', 'ambiguous': 'tab:orange', 'failed': 'tab:red'}
     gt = np.array([(r.gt_x, r.gt_y) for r in rows if r.has_truth])
     if len(gt):
-        ax.scatter(gt[:, 0], gt[:, 1], s=28, facecolors='none', edgecolors='k', label='ground truth')
+        ax.scatter(gt[:, 0], gt[:, 1], s=28, facecolors='none', edgecolors='k',
+                   label='ground truth')
     for status, color in colors.items():
         sel = [r for r in rows if r.status == status and not np.isnan(r.x)]
         if not sel:
@@ -119,10 +129,14 @@ def plot_index(index, path, title: str = '', show_ids: bool = True) -> None:
 
 
 def plot_match(ref_xy, new_xy, pose, out, pairs=None, truth=None, title: str = ''):
-    """Two panels: the scans as given (new scan drawn in the reference frame at ``truth`` if
-    known, else unaligned) and the new scan moved by the estimated ``pose`` over the reference,
-    with the ``pairs`` (K, 2) correspondences (indices into ref_xy / new_xy) as segments.
-    Writes a PNG to ``out`` and returns its path."""
+    """
+    Plot two panels: the scans as given, and aligned by the estimate.
+
+    Left, the new scan drawn in the reference frame at ``truth`` if known (else unaligned); right,
+    the new scan moved by the estimated ``pose`` over the reference, with the ``pairs`` (K, 2)
+    correspondences (indices into ref_xy / new_xy) as segments. Writes a PNG to ``out`` and
+    returns its path.
+    """
     plt = _pyplot()
     ref = np.asarray(ref_xy, float).reshape(-1, 2)
     new = np.asarray(new_xy, float).reshape(-1, 2)

@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import csv
-import math
 from dataclasses import asdict, dataclass, fields
+import math
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -36,7 +36,8 @@ class ResultRow:
     gt_yaw: float = math.nan
 
     @classmethod
-    def from_localization(cls, stamp: float, loc: Localization, truth: Pose2 | None) -> 'ResultRow':
+    def from_localization(cls, stamp: float, loc: Localization,
+                          truth: Pose2 | None) -> 'ResultRow':
         pose = loc.pose if loc.pose is not None else (math.nan, math.nan, math.nan)
         gt = truth if truth is not None else (math.nan, math.nan, math.nan)
         return cls(stamp=stamp, x=pose[0], y=pose[1], yaw=pose[2], status=loc.status,
@@ -78,12 +79,13 @@ class Summary:
     latency_p50_ms: float
     latency_p95_ms: float
 
-    def format(self, title: str = '') -> str:
+    def format(self, title: str = '') -> str:  # noqa: A003 - public name
         head = f'{title}: ' if title else ''
         return (f'{head}n={self.n} ok={self.ok} ambiguous={self.ambiguous} failed={self.failed} | '
                 f'success {self.success_rate:.1%} precision {self.precision:.1%} | median error '
-                f'{self.median_x_mm:.1f} / {self.median_y_mm:.1f} mm, {self.median_yaw_deg:.2f} deg '
-                f'(xy {self.median_xy_mm:.1f} mm) | mean {self.mean_x_mm:.1f} / {self.mean_y_mm:.1f} mm, '
+                f'{self.median_x_mm:.1f} / {self.median_y_mm:.1f} mm, '
+                f'{self.median_yaw_deg:.2f} deg (xy {self.median_xy_mm:.1f} mm) | mean '
+                f'{self.mean_x_mm:.1f} / {self.mean_y_mm:.1f} mm, '
                 f'{self.mean_yaw_deg:.2f} deg | latency p50 {self.latency_p50_ms:.0f} ms '
                 f'p95 {self.latency_p95_ms:.0f} ms')
 
@@ -124,8 +126,9 @@ def write_results_csv(rows: Iterable[ResultRow], path: str | Path) -> None:
                             else v) for k, v in d.items()})
 
 
-def match_truth(stamps: np.ndarray, truth: dict[float, Pose2], tol: float = 1e-3) -> list[Pose2 | None]:
-    """The ground-truth pose with the same stamp (within ``tol`` s) as each scan, else None."""
+def match_truth(stamps: np.ndarray, truth: dict[float, Pose2],
+                tol: float = 1e-3) -> list[Pose2 | None]:
+    """Return each scan's ground-truth pose (same stamp within ``tol`` s), else None."""
     if not truth:
         return [None] * len(stamps)
     keys = np.array(sorted(truth))
@@ -137,12 +140,14 @@ def match_truth(stamps: np.ndarray, truth: dict[float, Pose2], tol: float = 1e-3
     return out
 
 
-def replay_scans(localizer: GlobalLocalizer, scans: Sequence, truth: dict[float, Pose2] | None = None,
+def replay_scans(localizer: GlobalLocalizer, scans: Sequence,
+                 truth: dict[float, Pose2] | None = None,
                  progress: bool = True) -> list[ResultRow]:
     """Localize each ScanRecord on its own (no tracking, no odometry)."""
     truths = match_truth(np.array([s.stamp for s in scans]), truth or {})
     rows = []
-    for scan, gt in tqdm(zip(scans, truths), desc='replay', total=len(scans), disable=not progress):
+    for scan, gt in tqdm(zip(scans, truths), desc='replay', total=len(scans),
+                         disable=not progress):
         loc = localizer.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
                                       scan.range_min, scan.range_max)
         rows.append(ResultRow.from_localization(scan.stamp, loc, gt))

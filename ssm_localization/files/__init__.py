@@ -1,4 +1,5 @@
-"""User files read and written with guards: the bottom layer, imported by every other one.
+"""
+User files read and written with guards: the bottom layer, imported by every other one.
 
 - ``reading.py``: input files must be readable regular files of bounded size; echoes of their
   content in error messages are clipped;

@@ -1,9 +1,13 @@
-"""Reading user files with bounds: clear errors for what is not a readable regular file, a size
-limit on what is read, and clipped echoes of the input in error messages."""
+"""
+Reading user files with bounds.
+
+Clear errors for what is not a readable regular file, a size limit on what is read, and clipped
+echoes of the input in error messages.
+"""
 from __future__ import annotations
 
-import reprlib
 from pathlib import Path
+import reprlib
 from typing import Any
 
 #: longest echo of user input (a value, a parser message) inside an error message
@@ -16,7 +20,8 @@ _REPR.maxlist = _REPR.maxtuple = _REPR.maxdict = _REPR.maxset = 6
 
 
 def clip(text: Any, limit: int = MAX_ECHO_CHARS) -> str:
-    """``str(text)`` on one line (white space folded), at most ``limit`` characters.
+    """
+    ``str(text)`` on one line (white space folded), at most ``limit`` characters.
 
     Only the first ``4 * limit`` characters are looked at, so a huge text costs nothing more.
     """
@@ -26,12 +31,17 @@ def clip(text: Any, limit: int = MAX_ECHO_CHARS) -> str:
 
 
 def echo(value: Any, limit: int = MAX_ECHO_CHARS) -> str:
-    """A bounded ``repr`` of a user value (depth and element counts cut, then :func:`clip`)."""
+    """
+    Return a bounded ``repr`` of a user value.
+
+    Depth and element counts are cut, then the text is clipped (:func:`clip`).
+    """
     return clip(_REPR.repr(value), limit)
 
 
 def input_file(path: str | Path, what: str) -> Path:
-    """``path`` after checking it names an existing regular file; errors name ``what``.
+    """
+    ``path`` after checking it names an existing regular file; errors name ``what``.
 
     Raises ``FileNotFoundError`` (``'{what} not found: {path}'``) or ``ValueError`` for a
     directory or anything else that is not a regular file (a FIFO or a device would block or
@@ -48,7 +58,8 @@ def input_file(path: str | Path, what: str) -> Path:
 
 
 def read_bounded(path: str | Path, what: str, max_bytes: int) -> bytes:
-    """The bytes of the regular file ``path``, refusing one larger than ``max_bytes``.
+    """
+    Return the bytes of the regular file ``path``, refusing one larger than ``max_bytes``.
 
     Never reads more than ``max_bytes + 1`` bytes. Raises ``ValueError`` naming ``what`` and
     the file when it is too large or cannot be read (permissions, I/O error).

@@ -1,4 +1,5 @@
-"""Output files and directories written safely.
+"""
+Output files and directories written safely.
 
 Paths are checked before any work (:func:`check_output_file`, :func:`check_output_dir`), so a
 long computation never ends on an unwritable output. Writers then write to a temporary name
@@ -10,10 +11,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+from pathlib import Path
 import secrets
 import shutil
 import tempfile
-from pathlib import Path
 from typing import Iterator
 
 
@@ -38,7 +39,8 @@ def _check_parent(path: Path, what: str) -> None:
 
 
 def check_output_file(path: str | Path, what: str) -> Path:
-    """``path`` after checking a file can be written there; errors name ``what``.
+    """
+    ``path`` after checking a file can be written there; errors name ``what``.
 
     Refused with ``ValueError``: an existing directory, an existing non-regular file (a device,
     a FIFO: it would be replaced), a path under a regular file, an unwritable directory.
@@ -53,7 +55,8 @@ def check_output_file(path: str | Path, what: str) -> Path:
 
 
 def check_output_dir(path: str | Path, what: str, overwrite: bool | None = None) -> Path:
-    """``path`` after checking a directory can be written there; errors name ``what``.
+    """
+    ``path`` after checking a directory can be written there; errors name ``what``.
 
     ``overwrite=None``: the directory may exist already (a folder that receives files);
     ``False``: it must not exist (``FileExistsError`` otherwise); ``True``: an existing one will
@@ -94,14 +97,18 @@ def _remove_dirs(dirs: list[Path]) -> None:
 
 
 def temporary_name(path: Path) -> Path:
-    """A hidden, unique name beside ``path`` that keeps its suffix (writers pick the format from
-    it: ``.out.3f2a9c1e.tmp.png``)."""
+    """
+    Return a hidden, unique name beside ``path`` that keeps its suffix.
+
+    Writers pick the format from the suffix: ``.out.3f2a9c1e.tmp.png``.
+    """
     return path.with_name(f'.{path.stem}.{secrets.token_hex(4)}.tmp{path.suffix}')
 
 
 @contextlib.contextmanager
 def atomic_files(*paths: str | Path, what: str = 'output file') -> Iterator[tuple[Path, ...]]:
-    """Write several files all or nothing: yields one temporary path per target.
+    """
+    Write several files all or nothing: yields one temporary path per target.
 
     The caller writes every temporary path; when the block ends normally they are renamed over
     their targets. When it raises, the temporary files and the directories created for them are
@@ -133,8 +140,10 @@ def atomic_files(*paths: str | Path, what: str = 'output file') -> Iterator[tupl
 @contextlib.contextmanager
 def atomic_dir(path: str | Path, what: str = 'output directory',
                overwrite: bool = False) -> Iterator[Path]:
-    """Write a directory all or nothing: yields a path, not yet existing, with the same name in
-    a temporary directory beside ``path``.
+    """
+    Write a directory all or nothing.
+
+    Yields a path, not yet existing, with the same name in a temporary directory beside ``path``.
 
     The caller creates and fills it; when the block ends normally it replaces ``path`` (an
     existing one only with ``overwrite``). When it raises, everything written is removed and an

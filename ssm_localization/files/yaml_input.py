@@ -1,5 +1,8 @@
-"""YAML files read with bounds: a file-size limit and a ``yaml.SafeLoader`` subclass that refuses
-documents whose aliases expand to too many nodes ("billion laughs") or refer to themselves.
+"""
+YAML files read with bounds.
+
+A file-size limit and a ``yaml.SafeLoader`` subclass that refuses documents whose aliases expand to
+too many nodes ("billion laughs") or refer to themselves.
 
 PyYAML shares an anchored node between its aliases, so loading an alias bomb is cheap; what
 explodes is anything that walks the result (``repr`` in an error message, flattening, JSON). The
@@ -34,7 +37,8 @@ def _children(node: yaml.Node) -> list[yaml.Node]:
 
 
 def expanded_size(root: yaml.Node, limit: int = MAX_YAML_NODES) -> int:
-    """Nodes under ``root`` (itself included) with every alias expanded, at most ``limit``.
+    """
+    Nodes under ``root`` (itself included) with every alias expanded, at most ``limit``.
 
     Iterative and memoized on node identity, so its cost is linear in the composed graph.
     Raises :class:`YamlBombError` beyond ``limit`` or for an alias inside its own anchor.
@@ -87,6 +91,6 @@ def parse_yaml(data: bytes | str, where: str) -> Any:
 
 
 def load_yaml_file(path: str | Path, what: str, max_bytes: int = MAX_YAML_BYTES) -> Any:
-    """The YAML document in ``path`` (at most ``max_bytes``; see :func:`parse_yaml`)."""
+    """Return the YAML document in ``path`` (at most ``max_bytes``; see :func:`parse_yaml`)."""
     data = read_bounded(path, what, max_bytes)
     return parse_yaml(data, f'{what} {path}')

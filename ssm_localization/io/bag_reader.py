@@ -1,24 +1,26 @@
-"""Reading rosbag2 bags (mcap storage, ROS 2 Jazzy definitions) with ``rosbags``.
+"""
+Reading rosbag2 bags (mcap storage, ROS 2 Jazzy definitions) with ``rosbags``.
 
 A bag path is a rosbag2 directory (with ``metadata.yaml``), a directory holding one ``.mcap``
 file, or a bare ``.mcap`` file. Topics and records: see ``bag_records``. A bag cut short mid-file
-yields its readable prefix (read with the ``mcap`` stream reader) and a ``RuntimeWarning``.
+yields its readable prefix (read with the ``mcap`` stream reader, when the optional ``mcap``
+package is installed) and a ``RuntimeWarning``.
 """
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 from typing import Iterator
+import warnings
 
 import numpy as np
 
+from .bag_records import (BagData, BagError, GT_TOPIC, MAP_TOPIC, ODOM_TOPIC, SCAN_TOPIC,
+                          SCAN_TYPE, ScanRecord, typestore)
 from ..files.yaml_input import load_yaml_file
-from ..mapping.map_io import OccupancyMap, occupancy_map_from_msg
+from ..mapping.map_io import occupancy_map_from_msg, OccupancyMap
 from ..mapping.map_limits import MAX_MAP_CELLS
 from ..progress import ProgressCallback
 from ..transforms import Pose2, quaternion_to_yaw
-from .bag_records import (GT_TOPIC, MAP_TOPIC, ODOM_TOPIC, SCAN_TOPIC, SCAN_TYPE, BagData,
-                          BagError, ScanRecord, typestore)
 
 
 def _stamp_of(header) -> float:
@@ -53,10 +55,21 @@ def _resolve(path: str | Path) -> Path:
     return path
 
 
+MCAP_MISSING = ('reading what is left of a damaged bag needs the optional Python package mcap '
+                '(pip install mcap)')
+
+
 def _mcap_prefix(path: Path) -> tuple[list[tuple[str, str, bytes]], str]:
-    """The messages readable from the start of an mcap file cut short (via the ``mcap`` stream
-    reader), and why reading stopped."""
-    from mcap import records, stream_reader
+    """
+    Return the messages readable from the start of an mcap file cut short.
+
+    Read with the ``mcap`` stream reader (an optional dependency); also returns why reading
+    stopped.
+    """
+    try:
+        from mcap import records, stream_reader
+    except ImportError:
+        return [], MCAP_MISSING
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str]] = {}
     out: list[tuple[str, str, bytes]] = []
@@ -77,7 +90,8 @@ def _mcap_prefix(path: Path) -> tuple[list[tuple[str, str, bytes]], str]:
 
 
 class _Reader:
-    """Opens a bag with clear errors; iterates (topic, msg) in log-time order.
+    """
+    Opens a bag with clear errors; iterates (topic, msg) in log-time order.
 
     An mcap file cut short (no summary, e.g. a recorder that crashed) is read up to the
     truncation point with a ``RuntimeWarning``; one with nothing readable raises ``BagError``.
@@ -127,7 +141,8 @@ class _Reader:
             have = ', '.join(sorted(self.types)) or 'none'
             raise BagError(f'{self.path}: no {topic} topic in the bag (topics: {have})')
         if self.types[topic] != msgtype:
-            raise BagError(f'{self.path}: {topic} has type {self.types[topic]}, expected {msgtype}')
+            raise BagError(f'{self.path}: {topic} has type {self.types[topic]}, '
+                           f'expected {msgtype}')
 
     def messages(self, topics: set[str]) -> Iterator[tuple[str, object]]:
         if self.prefix is not None:
@@ -168,9 +183,13 @@ def _scan_record(msg) -> ScanRecord:
 
 
 def _map_from_msg(msg, max_cells: int) -> OccupancyMap:
-    """OccupancyGrid -> OccupancyMap; the float32 resolution is restored to its shortest decimal
-    (0.05, not 0.0500000007) so the map equals (and checksums like) the YAML it was made from.
-    Maps of more than ``max_cells`` cells (0: no limit) are refused before conversion."""
+    """
+    Convert OccupancyGrid -> OccupancyMap.
+
+    The float32 resolution is restored to its shortest decimal (0.05, not 0.0500000007) so the map
+    equals (and checksums like) the YAML it was made from. Maps of more than ``max_cells`` cells
+    (0: no limit) are refused before conversion.
+    """
     m = occupancy_map_from_msg(msg, max_cells)
     res = float(repr(np.float32(m.resolution)).removeprefix('np.float32(').rstrip(')'))
     return OccupancyMap(m.data, res, m.origin, m.frame_id)
@@ -198,7 +217,8 @@ def iter_scans(path: str | Path, scan_topic: str = SCAN_TOPIC,
 def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
              progress: ProgressCallback | None = None, require_scans: bool = True,
              max_map_cells: int = MAX_MAP_CELLS) -> BagData:
-    """Read a whole bag: the first /map, every scan, /ground_truth and /odom poses.
+    """
+    Read a whole bag: the first /map, every scan, /ground_truth and /odom poses.
 
     Raises ``FileNotFoundError`` for a missing path, ``BagError`` (a ``ValueError``) for a bag
     that cannot be opened or lacks ``scan_topic`` (unless ``require_scans=False``),

@@ -1,5 +1,7 @@
-"""What the bag reader and writer share: topic names and types, ``ScanRecord`` / ``BagData``,
-stamps and the rosbags type store.
+"""
+What the bag reader and writer share.
+
+Topic names and types, ``ScanRecord`` / ``BagData``, stamps and the rosbags type store.
 
 Topics (docs INTERFACES.md): ``/scan`` sensor_msgs/msg/LaserScan (frame ``laser``, no-return beams
 ``+inf``), ``/map`` nav_msgs/msg/OccupancyGrid (one message at the start, frame ``map``, offered
@@ -9,8 +11,8 @@ Stamps are float seconds; poses ``(x, y, yaw)``. ``rosbags`` is imported on firs
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+import math
 
 import numpy as np
 
@@ -64,20 +66,20 @@ class ScanRecord:
 class BagData:
     """Everything the package uses from one bag."""
 
-    map: OccupancyMap | None
+    map: OccupancyMap | None  # noqa: A003 - public field name
     scans: list[ScanRecord]
     ground_truth: dict[float, Pose2] = field(default_factory=dict)   # stamp -> base pose in map
     odom: dict[float, Pose2] = field(default_factory=dict)           # stamp -> pose in odom
     topic_counts: dict[str, int] = field(default_factory=dict)       # every topic in the bag
 
     def ground_truth_of(self, scan: ScanRecord) -> Pose2 | None:
-        """The /ground_truth pose carrying the scan's stamp, or None."""
+        """Return the /ground_truth pose carrying the scan's stamp, or None."""
         return self.ground_truth.get(scan.stamp)
 
 
 def typestore():
-    """The rosbags type store of ROS 2 Jazzy message definitions."""
-    from rosbags.typesys import Stores, get_typestore
+    """Return the rosbags type store of ROS 2 Jazzy message definitions."""
+    from rosbags.typesys import get_typestore, Stores
     return get_typestore(Stores.ROS2_JAZZY)
 
 

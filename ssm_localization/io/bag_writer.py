@@ -1,4 +1,5 @@
-"""Writing rosbag2 bags (mcap storage, ROS 2 Jazzy definitions) with ``rosbags``.
+"""
+Writing rosbag2 bags (mcap storage, ROS 2 Jazzy definitions) with ``rosbags``.
 
 Layout (topics, frames, stamps): see ``bag_records``; ``/map`` is written first and offered
 transient-local, then per scan ``/scan``, ``/ground_truth`` and ``/odom``.
@@ -11,12 +12,12 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
+from .bag_records import (GT_TOPIC, GT_TYPE, MAP_TOPIC, MAP_TYPE, ODOM_TOPIC, ODOM_TYPE,
+                          SCAN_TOPIC, SCAN_TYPE, ScanRecord, stamp_to_ns, typestore)
 from ..files.writing import atomic_dir
 from ..mapping.map_io import OccupancyMap
 from ..progress import ProgressCallback
 from ..transforms import Pose2, yaw_to_quaternion
-from .bag_records import (GT_TOPIC, GT_TYPE, MAP_TOPIC, MAP_TYPE, ODOM_TOPIC, ODOM_TYPE,
-                          SCAN_TOPIC, SCAN_TYPE, ScanRecord, stamp_to_ns, typestore)
 
 
 def _time_msg(ts, stamp: float):
@@ -37,8 +38,8 @@ def _pose_msg(ts, pose) -> object:
 
 
 def _latched_qos():
-    from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
-                                    QosReliability, QosTime)
+    from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
+                                    QosTime)
     zero = QosTime(0, 0)
     return [Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
                 zero, zero, QosLiveliness.AUTOMATIC, zero, False)]
@@ -66,7 +67,8 @@ def _map_msg(ts, occ_map, stamp: float):
 
 def _odom_msg(ts, stamp: float, pose, frame_id: str, child_frame_id: str):
     cov = np.zeros(36, dtype=np.float64)
-    pwc = ts.types['geometry_msgs/msg/PoseWithCovariance'](pose=_pose_msg(ts, pose), covariance=cov)
+    pwc = ts.types['geometry_msgs/msg/PoseWithCovariance'](pose=_pose_msg(ts, pose),
+                                                           covariance=cov)
     vec = ts.types['geometry_msgs/msg/Vector3']
     twist = ts.types['geometry_msgs/msg/Twist'](linear=vec(x=0.0, y=0.0, z=0.0),
                                                 angular=vec(x=0.0, y=0.0, z=0.0))
@@ -75,14 +77,15 @@ def _odom_msg(ts, stamp: float, pose, frame_id: str, child_frame_id: str):
                                child_frame_id=child_frame_id, pose=pwc, twist=twc)
 
 
-def write_bag(path: str | Path, map: OccupancyMap | None = None,
+def write_bag(path: str | Path, map: OccupancyMap | None = None,  # noqa: A002
               scans: Iterable[ScanRecord] = (),
               ground_truth: Mapping[float, Pose2] | None = None,
               odom: Mapping[float, Pose2] | None = None, overwrite: bool = False,
               map_stamp: float | None = None, odom_frame: str = 'odom',
               base_frame: str = 'base_link', compress: bool = True,
               progress: ProgressCallback | None = None) -> Path:
-    """Write a rosbag2 directory (mcap storage, Jazzy definitions); return its path.
+    """
+    Write a rosbag2 directory (mcap storage, Jazzy definitions); return its path.
 
     ``/map`` is written once, first (log time just before the first message, offered
     transient-local); then per scan in the given order ``/scan``, ``/ground_truth`` and ``/odom``

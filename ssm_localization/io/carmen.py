@@ -1,25 +1,29 @@
-"""CARMEN laser logs (Radish / Freiburg "corrected" logs): parsing, map building, bag conversion.
+"""
+CARMEN laser logs (Radish / Freiburg "corrected" logs): parsing, map building, bag conversion.
 
 ``FLASER n r_1 ... r_n x y theta odom_x odom_y odom_theta timestamp hostname logger_timestamp``.
 The ``x y theta`` of a FLASER line is the SLAM-corrected *laser* pose: used as ground truth.
 Scanners sweep right to left over 180 degrees: reading ``i`` is at ``-pi/2 + i * pi / n``
 (checked empirically: maps built with this convention fit the other scans better than with
 ``pi / (n - 1)``; see ``endpoint_fit``).
-Raw odometry is rebuilt from the ODOM lines: after each FLASER line the log restarts odometry at the
-corrected pose, so the increment between scans k and k+1 is ``inverse(reset_k) * last_odom_k+1``.
+Raw odometry is rebuilt from the ODOM lines: after each FLASER line the log restarts odometry at
+the corrected pose, so the increment between scans k and k+1 is ``inverse(reset_k) *
+last_odom_k+1``.
 """
 from __future__ import annotations
 
-import gzip
-import shutil
-import zlib
 from dataclasses import dataclass
+import gzip
 from pathlib import Path
+import shutil
 from typing import Iterator, Sequence
+import zlib
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from .bag_records import ScanRecord
+from .bag_writer import write_bag
 from ..config.mapping import MapBuildConfig
 from ..files.reading import clip, input_file
 from ..files.writing import check_output_dir, check_output_file
@@ -28,8 +32,6 @@ from ..mapping.map_io import OccupancyMap, save_map_yaml
 from ..mapping.map_limits import MAX_MAP_CELLS
 from ..progress import ProgressCallback
 from ..transforms import apply, compose, inverse
-from .bag_records import ScanRecord
-from .bag_writer import write_bag
 
 #: no-return readings of the shared logs (the sensor maximum), by file-name prefix
 NO_RETURN = {'intel': 81.83, 'aces': 50.0, 'freiburg-079': 81.91}
@@ -73,8 +75,12 @@ def _no_return_for(path: Path, ranges: np.ndarray) -> float:
 
 
 def _log_lines(path: Path) -> Iterator[tuple[int, str]]:
-    """``(line number, line)`` of a text or gzipped log; ``ValueError`` naming the file for
-    binary garbage, a corrupt gzip stream or a line longer than :data:`MAX_LINE_CHARS`."""
+    """
+    ``(line number, line)`` of a text or gzipped log.
+
+    ``ValueError`` naming the file for binary garbage, a corrupt gzip stream or a line longer than
+    :data:`MAX_LINE_CHARS`.
+    """
     opener = gzip.open if path.suffix == '.gz' else open
     try:
         with opener(path, 'rt', encoding='utf-8') as fh:
@@ -88,7 +94,8 @@ def _log_lines(path: Path) -> Iterator[tuple[int, str]]:
 
 
 def read_carmen_log(path: str | Path, max_range: float | None = None) -> CarmenLog:
-    """Parse the FLASER lines of a (optionally gzipped) CARMEN log.
+    """
+    Parse the FLASER lines of a (optionally gzipped) CARMEN log.
 
     Readings ``>= max_range`` (default: the log's known no-return value) become ``+inf``.
     Raises ``ValueError`` naming the file and line for malformed lines.
@@ -159,7 +166,7 @@ def select_scans(count: int, which: str = 'all', every: int = 1, first: int | No
                  last: int | None = None, max_scans: int | None = None) -> np.ndarray:
     """Scan indices: ``which`` in even/odd/all within ``[first, last)``, every ``every``-th."""
     if which not in ('even', 'odd', 'all'):
-        raise ValueError(f"scan selection must be even, odd or all, got {which!r}")
+        raise ValueError(f'scan selection must be even, odd or all, got {which!r}')
     if every < 1:
         raise ValueError(f'every must be >= 1, got {every}')
     idx = np.arange(count)[slice(first, last)]
@@ -173,8 +180,12 @@ def build_map(log: CarmenLog, indices: Sequence[int] | None = None,
               config: MapBuildConfig | None = None, beam_angles: np.ndarray | None = None,
               progress: ProgressCallback | None = None,
               max_cells: int = MAX_MAP_CELLS) -> OccupancyMap:
-    """Occupancy map of ``log`` from the scans ``indices`` (default: the even ones); a grid of
-    more than ``max_cells`` cells (0: no limit) is refused before it is allocated."""
+    """
+    Build the occupancy map of ``log`` from the scans ``indices`` (default: the even ones).
+
+    A grid of more than ``max_cells`` cells (0: no limit) is refused before it is
+    allocated.
+    """
     idx = select_scans(len(log), 'even') if indices is None else np.asarray(indices, dtype=int)
     if idx.size == 0:
         raise ValueError(f'{log.name}: no scans selected for the map')
@@ -184,8 +195,12 @@ def build_map(log: CarmenLog, indices: Sequence[int] | None = None,
 
 def endpoint_fit(occ_map: OccupancyMap, log: CarmenLog, indices: Sequence[int],
                  beam_angles: np.ndarray | None = None, max_range: float = 20.0) -> np.ndarray:
-    """Distance (m) from each finite endpoint (range < max_range) of the scans ``indices``, placed
-    at their corrected poses, to the nearest occupied cell centre of ``occ_map``."""
+    """
+    Return the distance (m) from each endpoint of the scans ``indices`` to the map.
+
+    Finite endpoints (range < max_range) placed at their corrected poses, to the nearest occupied
+    cell centre of ``occ_map``.
+    """
     occ = np.asarray(occ_map.data) >= 65
     if not occ.any():
         raise ValueError('map has no occupied cells')
@@ -210,8 +225,12 @@ def endpoint_fit(occ_map: OccupancyMap, log: CarmenLog, indices: Sequence[int],
 # ---------------------------------------------------------------- conversion to map + bag
 
 def monotonic_stamps(stamps: np.ndarray, min_step: float = 1e-3) -> np.ndarray:
-    """``stamps`` made strictly increasing: a stamp that does not exceed its predecessor becomes
-    the predecessor plus ``min_step`` (Intel's clock jumps backwards 4 times)."""
+    """
+    ``stamps`` made strictly increasing.
+
+    A stamp that does not exceed its predecessor becomes the predecessor plus ``min_step`` (Intel's
+    clock jumps backwards 4 times).
+    """
     out = np.asarray(stamps, dtype=float).copy()
     for k in range(1, len(out)):
         if out[k] <= out[k - 1]:
@@ -220,8 +239,11 @@ def monotonic_stamps(stamps: np.ndarray, min_step: float = 1e-3) -> np.ndarray:
 
 
 def log_scan_records(log: CarmenLog, indices: Sequence[int]) -> list[ScanRecord]:
-    """The scans ``indices`` as ``ScanRecord`` s (frame ``laser``, float32 ranges, ``+inf`` for no
-    return, ``range_max`` = the no-return value)."""
+    """
+    Return the scans ``indices`` as ``ScanRecord`` s.
+
+    Frame ``laser``, float32 ranges, ``+inf`` for no return, ``range_max`` = the no-return value.
+    """
     stamps = monotonic_stamps(log.stamps)
     return [ScanRecord.from_ranges(stamps[k], log.ranges[k].astype(np.float32), log.angle_min,
                                    log.angle_increment, range_min=0.0,
@@ -232,9 +254,13 @@ def log_scan_records(log: CarmenLog, indices: Sequence[int]) -> list[ScanRecord]
 def write_log_bag(log: CarmenLog, indices: Sequence[int], path: str | Path,
                   occ_map: OccupancyMap | None = None, with_odom: bool = True,
                   overwrite: bool = False, progress: ProgressCallback | None = None) -> Path:
-    """A bag with /map (``occ_map``), /scan (the scans ``indices``), /ground_truth (their
-    corrected poses: the log's world frame is the map frame and the base is the laser) and
-    /odom (raw odometry rebuilt from the ODOM lines, when the log has it)."""
+    """
+    Write a bag with /map, /scan, /ground_truth and /odom.
+
+    /map is ``occ_map``, /scan the scans ``indices``, /ground_truth their corrected poses (the
+    log's world frame is the map frame and the base is the laser), /odom the raw odometry rebuilt
+    from the ODOM lines, when the log has it.
+    """
     scans = log_scan_records(log, indices)
     idx = np.asarray(indices, dtype=int)
     gt = {s.stamp: tuple(float(v) for v in log.poses[k]) for s, k in zip(scans, idx)}
@@ -264,11 +290,16 @@ def convert_carmen(log_path: str | Path, out_dir: str | Path, name: str | None =
                    bag_path: str | Path | None = None,
                    progress: ProgressCallback | None = None,
                    max_map_cells: int = MAX_MAP_CELLS) -> ConversionResult:
-    """CARMEN log -> ``OUT/NAME.yaml`` + ``.pgm`` (map of the ``map_scans`` scans) and the bag
-    ``OUT/NAME_queries/`` (the ``query_scans`` scans, every ``every``-th, at most ``max_scans``).
-    ``first``/``last`` restrict both to the scan index range ``[first, last)``; ``bag_path``
-    overrides the bag's location. Every output path is checked before the map is built; a map
-    of more than ``max_map_cells`` cells (0: no limit) is refused."""
+    """
+    Convert a CARMEN log to a map and a query bag.
+
+    ``OUT/NAME.yaml`` + ``.pgm`` is the map of the ``map_scans`` scans, the bag
+    ``OUT/NAME_queries/`` holds the ``query_scans`` scans (every ``every``-th, at most
+    ``max_scans``). ``first``/``last`` restrict both to the scan index
+    range ``[first, last)``; ``bag_path`` overrides the bag's location. Every output path is
+    checked before the map is built; a map of more than ``max_map_cells`` cells (0: no limit) is
+    refused.
+    """
     out_dir = check_output_dir(out_dir, 'output directory')
     log = read_carmen_log(log_path)
     name = name or log.name

@@ -1,25 +1,28 @@
-"""Simulated query scans on an occupancy map: random free-space poses, ray casting, range noise,
-unmapped clutter (discs near the robot that occlude beams), spurious short readings, field of view.
+"""
+Simulated query scans on an occupancy map.
+
+Random free-space poses, ray casting, range noise, unmapped clutter (discs near the robot that
+occlude beams), spurious short readings, field of view.
 
 Deterministic for a given seed; the poses depend only on the seed, the map and the clearance, so
 a clean and a cluttered run with the same seed share their poses.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from .bag_records import ScanRecord
+from .bag_writer import write_bag
 from ..config.simulation import SimulationConfig
 from ..mapping.map_io import OccupancyMap
 from ..mapping.raycast import cast_rays
 from ..progress import ProgressCallback
 from ..transforms import compose
-from .bag_records import ScanRecord
-from .bag_writer import write_bag
 
 
 @dataclass(frozen=True, eq=False)
@@ -35,8 +38,11 @@ class Simulation:
 
 def sample_free_poses(occ_map: OccupancyMap, count: int, clearance: float,
                       rng: np.random.Generator) -> np.ndarray:
-    """(count, 3) poses uniform over free cells at least ``clearance`` from non-free cells
-    (unknown counts as an obstacle), uniform within the cell, yaw uniform in [-pi, pi)."""
+    """
+    Return (count, 3) poses uniform over free cells at least ``clearance`` from non-free cells.
+
+    Unknown counts as an obstacle; positions are uniform within the cell, yaw in [-pi, pi).
+    """
     free = occ_map.free_mask()
     dist = distance_transform_edt(free) * occ_map.resolution
     rows, cols = np.nonzero(free & (dist >= max(clearance, 0.0) + 0.5 * occ_map.resolution))

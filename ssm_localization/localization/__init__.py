@@ -1,1 +1,5 @@
-"""Global localization on an indexed map (paper section IV): localizer, refinement, verification."""
+"""
+Global localization on an indexed map (paper section IV).
+
+Localizer, refinement, verification.
+"""

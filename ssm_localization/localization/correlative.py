@@ -1,4 +1,5 @@
-"""Correlative scan matching by branch and bound over a map (beyond the paper).
+"""
+Correlative scan matching by branch and bound over a map (beyond the paper).
 
 The exhaustive search Cartographer uses to relocalize (Hess et al. 2016, after Olson 2009): a
 scan's points, rotated by each candidate yaw, are scored on a likelihood grid of the map (the
@@ -18,9 +19,9 @@ runs the full search (every yaw at 1 degree) as the reference.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
@@ -34,9 +35,13 @@ _SCALE = 255.0
 
 @dataclass(frozen=True)
 class CorrelativeResult:
-    """Leaves of one search, best first: ``poses`` (L, 3) map-frame sensor poses, ``scores``
-    (L,) their mean likelihood in [0, 1]; ``evaluated`` candidates scored at all levels;
-    ``complete`` is False when the time budget stopped the search early."""
+    """
+    Leaves of one search, best first.
+
+    ``poses`` (L, 3) map-frame sensor poses, ``scores`` (L,) their mean likelihood in [0, 1];
+    ``evaluated`` candidates scored at all levels; ``complete`` is False when the time budget
+    stopped the search early.
+    """
 
     poses: np.ndarray
     scores: np.ndarray
@@ -54,7 +59,8 @@ class CorrelativeResult:
 
 
 class CorrelativeGrid:
-    """The precomputed grids of one map; :meth:`search` runs one branch-and-bound search.
+    """
+    The precomputed grids of one map; :meth:`search` runs one branch-and-bound search.
 
     ``sigma`` (m) is the width of the likelihood, ``depth`` the number of coarser levels (the top
     level's windows are ``2**depth`` cells wide), ``max_range`` (m) the farthest scan point used
@@ -130,7 +136,8 @@ class CorrelativeGrid:
                window: tuple[float, float, float, float] | None = None, min_score: float = 0.5,
                ratio: float = 1.0, max_leaves: int = 256, batch: int = 512,
                budget_s: float | None = None) -> CorrelativeResult:
-        """Best poses of the sensor for ``points`` (N, 2) given in the sensor frame.
+        """
+        Best poses of the sensor for ``points`` (N, 2) given in the sensor frame.
 
         ``yaws``: map-frame yaws to try (default: the full turn every ``angular_step``);
         ``window``: ``(x_min, y_min, x_max, y_max)`` map-frame box of sensor positions (default:

@@ -1,4 +1,5 @@
-"""Global localization of one laser scan on an indexed map (paper section IV, and beyond).
+"""
+Global localization of one laser scan on an indexed map (paper section IV, and beyond).
 
 Pipeline for one query scan (``LocalizerConfig`` names the knobs):
 1. query features (II.A): spatially even points, tangents (eq. 1), shape descriptors;
@@ -28,27 +29,27 @@ vicinity score (eq. 10) wins, always ``ok``.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass, field
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .correlative import CorrelativeGrid
+from .refine import refine_poses, SurfaceModel
+from .verify import BeamCheck, check_beams
+from .voting import alignment_yaws, PoseVoting, Votes
 from ..config.localization import LocalizerConfig
 from ..mapping.index import MapIndex
 from ..mapping.raycast import RayCaster
-from ..matching.features import ScanFeatures, prepare_scan
+from ..matching.features import prepare_scan, ScanFeatures
 from ..matching.matcher import match_features, spectral_score, spectral_solution
 from ..matching.pairwise import affinity_matrix, angle_table, distance_table
 from ..matching.ransac import ransac_hypotheses
 from ..matching.scan import ranges_to_points
 from ..matching.spectral import binarize, leading_eigenvector, matching_score
-from ..transforms import Pose2, apply, compose, inverse, wrap_angle
-from .correlative import CorrelativeGrid
-from .refine import SurfaceModel, refine_poses
-from .verify import BeamCheck, check_beams
-from .voting import PoseVoting, Votes, alignment_yaws
+from ..transforms import apply, compose, inverse, Pose2, wrap_angle
 
 STATUSES = ('ok', 'ambiguous', 'failed')
 #: where a hypothesis came from
@@ -85,9 +86,12 @@ class Hypothesis:
 
 @dataclass
 class Query:
-    """One scan, prepared once: ``features`` (spatially even points, tangents, descriptors),
-    ``points`` every valid endpoint (laser frame), ``angles`` / ``beams`` the beams for the ray
-    check (``inf`` = no return)."""
+    """
+    One scan, prepared once.
+
+    ``features`` (spatially even points, tangents, descriptors), ``points`` every valid endpoint
+    (laser frame), ``angles`` / ``beams`` the beams for the ray check (``inf`` = no return).
+    """
 
     features: ScanFeatures
     points: np.ndarray
@@ -116,7 +120,8 @@ class Localization:
 
 def vicinity_score(node_points: np.ndarray, query_points: np.ndarray, pose: Pose2,
                    sigma_d: float, tree: cKDTree | None = None) -> float:
-    """Eq. (10): ``sum_i 4.5 - d_i^2 / (2 sigma_d^2)`` over pairs closer than ``3 sigma_d``.
+    """
+    Eq. (10): ``sum_i 4.5 - d_i^2 / (2 sigma_d^2)`` over pairs closer than ``3 sigma_d``.
 
     Pairs are each query point (moved into the node frame by ``pose``) and its nearest node point.
     """
@@ -138,8 +143,11 @@ def _same(a: Pose2, b: Pose2) -> bool:
 
 
 def _merged(ranked: list[Hypothesis], pose_of) -> list[Hypothesis]:
-    """``ranked`` without duplicates (the same pose within 5 cm and 0.02 rad): the first of each
-    stays and records the sources of the others in ``found_by``."""
+    """
+    ``ranked`` without duplicates (the same pose within 5 cm and 0.02 rad).
+
+    The first of each stays and records the sources of the others in ``found_by``.
+    """
     out: list[Hypothesis] = []
     for h in ranked:
         twin = next((o for o in out if _same(pose_of(h), pose_of(o))), None)
@@ -168,7 +176,8 @@ class _Clock:
 
 
 class GlobalLocalizer:
-    """Single-scan global localization against a :class:`MapIndex`.
+    """
+    Single-scan global localization against a :class:`MapIndex`.
 
     Everything that depends on the map only (the pooled node features, the correlative grids,
     the wall surface model, the ray caster) is built here once; ``localize_*`` does per-scan work.
@@ -201,11 +210,11 @@ class GlobalLocalizer:
 
     # -- frames -------------------------------------------------------------------------------
     def base_pose(self, laser_pose: Pose2) -> Pose2:
-        """The base pose in the map frame given the laser's."""
+        """Return the base pose in the map frame given the laser's."""
         return compose(laser_pose, self._base_from_laser)
 
     def laser_pose(self, base_pose: Pose2) -> Pose2:
-        """The laser pose in the map frame given the base's."""
+        """Return the laser pose in the map frame given the base's."""
         return compose(base_pose, self.config.laser_pose)
 
     # -- entry points -----------------------------------------------------------------------
@@ -235,7 +244,7 @@ class GlobalLocalizer:
 
     def prepare_scan(self, ranges, angle_min: float, angle_increment: float,
                      range_min: float = 0.0, range_max: float = float('inf')) -> Query:
-        """A :class:`Query` from LaserScan fields; ``ValueError`` for a malformed scan."""
+        """Return a :class:`Query` from LaserScan fields; ``ValueError`` for a malformed scan."""
         ranges = np.asarray(ranges, dtype=float).ravel()
         points, _ = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
         angles = angle_min + angle_increment * np.arange(len(ranges))
@@ -250,7 +259,7 @@ class GlobalLocalizer:
                      angles=angles, beams=beams)
 
     def localize_query(self, query: Query, clock: _Clock | None = None) -> Localization:
-        """The whole pipeline on a prepared query."""
+        """Return the whole pipeline on a prepared query."""
         clock = clock or _Clock()
         clock.lap('prepare')
         if self.config.paper_mode:
@@ -314,8 +323,9 @@ class GlobalLocalizer:
         mp = self.voting.points[uj]
         mt = np.column_stack((np.cos(self.voting.angles[uj]), np.sin(self.voting.angles[uj])))
         pairs = np.column_stack((lj.ravel(), li.ravel()))
-        g = affinity_matrix(distance_table(mp), angle_table(mt), distance_table(qp), angle_table(qt),
-                            pairs, mc.weights, mc.max_dist_deform, mc.max_angle_deform)
+        g = affinity_matrix(distance_table(mp), angle_table(mt), distance_table(qp),
+                            angle_table(qt), pairs, mc.weights, mc.max_dist_deform,
+                            mc.max_angle_deform)
         x = leading_eigenvector(g, mc.power_iterations, mc.power_tol)
         sel = binarize(x, pairs, mc.binarize_min_ratio)
         return sel, matching_score(g, sel)
@@ -323,8 +333,12 @@ class GlobalLocalizer:
     def search_hypotheses(self, query: Query, seeds: list[Hypothesis],
                           window: tuple[float, float, float, float] | None = None,
                           yaws: np.ndarray | None = None) -> list[Hypothesis]:
-        """Correlative branch and bound over the map (or ``window``) at the given ``yaws``, by
-        default the yaws of the ``search_seeds`` best seeds and their flips, +- ``search_spread``."""
+        """
+        Correlative branch and bound over the map.
+
+        (or ``window``) at the given ``yaws``, by default the yaws of the ``search_seeds`` best
+        seeds and their flips, +- ``search_spread``.
+        """
         cfg = self.config
         pts = _evenly(query.features.points, cfg.search_points)
         if yaws is None:
@@ -345,9 +359,12 @@ class GlobalLocalizer:
         return out
 
     def _seed_yaws(self, query: Query, seeds: list[Hypothesis]) -> np.ndarray:
-        """Yaws to search: the orientations of the best hypotheses by correlative score, up to
-        ``search_seeds`` distinct ones (modulo a half turn), each with its flip, each
-        +- ``search_spread``."""
+        """
+        Yaws to search.
+
+        The orientations of the best hypotheses by correlative score, up to ``search_seeds``
+        distinct ones (modulo a half turn), each with its flip, each +- ``search_spread``.
+        """
         cfg = self.config
         centres: list[float] = []
         for h in self._best_by_correlation(query, seeds):
@@ -357,9 +374,9 @@ class GlobalLocalizer:
             if len(centres) >= cfg.search_seeds:
                 break
         feats = query.features
-        for yaw in alignment_yaws(self._map_directions, np.arctan2(feats.tangents[:, 1],
-                                                                    feats.tangents[:, 0]),
-                                  None, cfg.search_alignments):
+        scan_angles = np.arctan2(feats.tangents[:, 1], feats.tangents[:, 0])
+        for yaw in alignment_yaws(self._map_directions, scan_angles, None,
+                                  cfg.search_alignments):
             if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * cfg.search_step for c in centres):
                 centres.append(float(yaw))
         if not centres:
@@ -380,8 +397,11 @@ class GlobalLocalizer:
 
     def refine(self, query: Query, hyps: list[Hypothesis],
                limit: int | None = None) -> list[Hypothesis]:
-        """Refine the ``refine_hypotheses`` first hypotheses on the wall surface (batched);
-        merge those that meet; best explained first."""
+        """
+        Refine the ``refine_hypotheses`` first hypotheses on the wall surface (batched).
+
+        Merge those that meet; best explained first.
+        """
         cfg = self.config
         todo = hyps[:cfg.refine_hypotheses if limit is None else limit]
         if not todo:
@@ -399,11 +419,14 @@ class GlobalLocalizer:
         return _merged(sorted(todo, key=lambda h: -h.explained), lambda h: h.laser_pose)
 
     def verify_contenders(self, query: Query, refined: list[Hypothesis]) -> None:
-        """Verify (best explained first) the ``verify_hypotheses`` first, every one within
-        ``verify_margin`` of the best explained fraction, then, until none is left, every one
-        that could still win or be a rival: a score never exceeds the explained fraction, so an
-        unverified hypothesis explaining less than the best verified score minus
-        ``ambiguity_margin`` can be neither."""
+        """
+        Verify every hypothesis that could win or be a rival.
+
+        Best explained first: the ``verify_hypotheses`` first, every one within ``verify_margin``
+        of the best explained fraction, then, until none is left, every one that could still win
+        or be a rival: a score never exceeds the explained fraction, so an unverified hypothesis
+        explaining less than the best verified score minus ``ambiguity_margin`` can be neither.
+        """
         cfg = self.config
         if not refined:
             return
@@ -432,7 +455,7 @@ class GlobalLocalizer:
             h.score = h.explained - cfg.contradiction_weight * h.check.contradicting
 
     def polish(self, query: Query, h: Hypothesis) -> None:
-        """A last Gauss-Newton run of one hypothesis on every endpoint of the scan."""
+        """Return a last Gauss-Newton run of one hypothesis on every endpoint of the scan."""
         cfg = self.config
         if cfg.polish_iterations <= 0:
             return
@@ -447,8 +470,10 @@ class GlobalLocalizer:
 
     def decide(self, query: Query, hyps: list[Hypothesis], clock: _Clock | None = None,
                others: list[Hypothesis] = ()) -> Localization:
-        """The answer from refined and verified hypotheses: the best scoring one, polished on
-        every endpoint, with the status of :func:`verdict`.
+        """
+        Return the answer from refined and verified hypotheses.
+
+        The best scoring one, polished on every endpoint, with the status of :func:`verdict`.
 
         ``candidates`` of the answer: the verified hypotheses by score, then the refined ones,
         then ``others`` (not refined), for diagnosis (``bench localize`` reads them).
@@ -469,7 +494,7 @@ class GlobalLocalizer:
                             + list(others))
 
     def report_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
-        """The Gauss-Newton laser covariance, scaled and floored, propagated to the base."""
+        """Return the Gauss-Newton laser covariance, scaled and floored, propagated to the base."""
         cfg = self.config
         cov = cfg.covariance_scale * np.asarray(cov_laser, float) + np.diag(
             [cfg.min_position_std ** 2, cfg.min_position_std ** 2, cfg.min_yaw_std ** 2])
@@ -480,8 +505,12 @@ class GlobalLocalizer:
 
     # -- the paper's pipeline -----------------------------------------------------------------
     def _paper(self, query: Query, clock: _Clock) -> Localization:
-        """Section IV as written: all nodes ranked by spectral score, RANSAC + LS on the top_n,
-        the largest vicinity score (eq. 10) wins."""
+        """
+        Section IV as written.
+
+        All nodes ranked by spectral score, RANSAC + LS on the top_n, the largest vicinity score
+        (eq. 10) wins.
+        """
         cfg = self.config
         feats = query.features
         scored = []
@@ -526,8 +555,8 @@ def _evenly(points: np.ndarray, count: int) -> np.ndarray:
 
 
 def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig) -> tuple[str, str, np.ndarray]:
-    """``(status, message, covariance)`` for verified hypotheses, plausible ones first, then by
-    score.
+    """
+    ``(status, message, covariance)`` for verified hypotheses, plausible ones first, then by score.
 
     ``failed`` when even the best has more than ``max_contradicting`` of its beams seeing through
     walls, or explains too little of the scan (score below ``min_score``);
@@ -563,12 +592,12 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig) -> tuple[str, str, n
 
 
 def position_std(cov: np.ndarray | None) -> float:
-    """Standard deviation (m) of the position along its least constrained direction."""
+    """Return standard deviation (m) of the position along its least constrained direction."""
     if cov is None:
         return float('inf')
     return float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(cov)[:2, :2]).max(), 0.0)))
 
 
 def _inflated(cov: np.ndarray) -> np.ndarray:
-    """The covariance of a rejected pose: it says nothing about where the robot is."""
+    """Return the covariance of a rejected pose: it says nothing about where the robot is."""
     return cov + np.diag([1e2, 1e2, np.pi ** 2])

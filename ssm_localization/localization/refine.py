@@ -1,4 +1,5 @@
-"""Pose refinement against the map itself (beyond the paper).
+"""
+Pose refinement against the map itself (beyond the paper).
 
 The paper stops at the RANSAC pose relative to a node's virtual scan, so its accuracy is bounded
 by the virtual scan's sampling. Here the winning hypotheses are refined by Gauss-Newton on the
@@ -22,14 +23,14 @@ from scipy import ndimage
 
 from ..transforms import Pose2, rotation, wrap_angle
 
-
 #: lattice points per cell side of the precomputed signed distance
 SUBDIVISION = 2
 
 
 @dataclass(frozen=True, eq=False)
 class SurfaceModel:
-    """Signed distance to the boundary of occupied cells, shifted by ``depth`` metres.
+    """
+    Signed distance to the boundary of occupied cells, shifted by ``depth`` metres.
 
     The exact distance is precomputed on a lattice of half-cell spacing (``lattice``, float32, in
     cells): the closest point of a union of lattice-aligned boxes to a lattice point is itself a
@@ -62,14 +63,15 @@ class SurfaceModel:
                    depth=float(surface_depth_cells) * float(resolution))
 
     def signed_distance(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Signed distance (m) of map-frame points to the wall surface, its gradient, validity.
+        """
+        Signed distance (m) of map-frame points to the wall surface, its gradient, validity.
 
         Positive in free space, negative inside walls; points off the grid are invalid.
         """
         ox, oy, oyaw = self.origin
         rot = rotation(oyaw)
-        g = (np.asarray(pts, float).reshape(-1, 2) - (ox, oy)) @ rot * (SUBDIVISION
-                                                                         / self.resolution)
+        scale = SUBDIVISION / self.resolution
+        g = (np.asarray(pts, float).reshape(-1, 2) - (ox, oy)) @ rot * scale
         h, w = self.lattice.shape
         j0 = np.floor(g[:, 0]).astype(np.int64)
         i0 = np.floor(g[:, 1]).astype(np.int64)
@@ -120,7 +122,8 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
                  truncate: tuple[float, float] = (0.3, 0.1), inlier_distance: float = 0.1,
                  min_sigma: float = 0.005, estimate_depth: bool = False,
                  depth_prior: float = 0.25, score_sigma: float = 0.05) -> list[RefineResult]:
-    """Gauss-Newton on ``sum rho(sdf(R p + t) + delta)`` for several laser poses at once (batched).
+    """
+    Gauss-Newton on ``sum rho(sdf(R p + t) + delta)`` for several laser poses at once (batched).
 
     The truncation radius shrinks from ``truncate[0]`` to ``truncate[1]`` so clutter and unmapped
     objects drop out; Huber weights soften the rest. The covariance is ``sigma^2 (J^T W J)^-1``
@@ -146,7 +149,8 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
     for it in range(1, iterations + 1):
         if n_p < 3 or not active.any():
             break
-        trunc = truncate[0] + (truncate[1] - truncate[0]) * min(1.0, (it - 1) / max(iterations // 2, 1))
+        trunc = truncate[0] + (truncate[1] - truncate[0]) * min(
+            1.0, (it - 1) / max(iterations // 2, 1))
         world, rel = _transform(x, pts)
         r, g, valid = surface.signed_distance(world.reshape(-1, 2))
         r = r.reshape(n_h, n_p) + delta[:, None]
@@ -176,7 +180,8 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
         if estimate_depth:
             delta = np.clip(delta + step[:, 3], lo, hi)
         done_iters[ok] = it
-        active &= enough & ((np.hypot(step[:, 0], step[:, 1]) >= 1e-5) | (np.abs(step[:, 2]) >= 1e-6))
+        active &= enough & ((np.hypot(step[:, 0], step[:, 1]) >= 1e-5)
+                            | (np.abs(step[:, 2]) >= 1e-6))
     world, _ = _transform(x, pts)
     r, _, valid = surface.signed_distance(world.reshape(-1, 2))
     r = r.reshape(n_h, n_p) + delta[:, None]
@@ -194,7 +199,8 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
             pose=(float(x[k, 0]), float(x[k, 1]), float(x[k, 2])), covariance=cov,
             rms=float(np.sqrt(np.mean(rk[ik] ** 2))) if ik.any() else float('inf'),
             inlier_fraction=float(ik.mean()) if n_p else 0.0,
-            cost=float(np.mean(np.where(ik, rk ** 2, inlier_distance ** 2))) if n_p else float('inf'),
+            cost=(float(np.mean(np.where(ik, rk ** 2, inlier_distance ** 2))) if n_p
+                  else float('inf')),
             iterations=int(done_iters[k]), depth=float(surface.depth + delta[k]),
             explained=float(explained[k].mean()) if n_p else 0.0))
     return out

@@ -1,5 +1,8 @@
-"""Verification of a pose against the map (beyond the paper): the scan's beams compared with
-beams ray-cast on the map from that pose."""
+"""
+Verification of a pose against the map (beyond the paper).
+
+The scan's beams compared with beams ray-cast on the map from that pose.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -22,7 +25,8 @@ class BeamCheck:
 
 def check_beams(measured: np.ndarray, expected: np.ndarray, tol: float = 0.15,
                 rel_tol: float = 0.02) -> BeamCheck:
-    """Compare measured ranges with ranges ray-cast on the map (``inf`` = no return / no hit).
+    """
+    Compare measured ranges with ranges ray-cast on the map (``inf`` = no return / no hit).
 
     Beams with no return where the map expects none are consistent; a no-return where the map has
     a wall counts as neither (glass, dark surfaces), so only solid evidence contradicts a pose.

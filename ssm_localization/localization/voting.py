@@ -1,4 +1,5 @@
-"""Pose voting over every node's virtual-scan features (beyond the paper).
+"""
+Pose voting over every node's virtual-scan features (beyond the paper).
 
 The paper matches the query against each node's virtual scan separately. Here the features of all
 virtual scans are pooled in the map frame (each point with its tangent direction and shape
@@ -12,8 +13,8 @@ the tentative set L the spectral matching (eqs. 2-6) then works on.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -31,9 +32,11 @@ _OFFSETS = np.array([(dx, dy, da) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for 
 
 @dataclass(frozen=True)
 class Votes:
-    """Tentative correspondences ``query[qi[v]] <-> map feature mj[v]`` and the pose each implies.
+    """
+    Tentative correspondences ``query[qi[v]] <-> map feature mj[v]`` and the pose each implies.
 
-    ``bins`` (V, 3) are their (x, y, yaw) histogram bins, ``weight`` (V,) their vote weight."""
+    ``bins`` (V, 3) are their (x, y, yaw) histogram bins, ``weight`` (V,) their vote weight.
+    """
 
     qi: np.ndarray
     mj: np.ndarray
@@ -46,9 +49,12 @@ class Votes:
 
 @dataclass(frozen=True)
 class Peak:
-    """A local maximum of the vote histogram: its ``strength`` (summed weight of the votes in
-    its 3 x 3 x 3 neighbourhood), the ``pose`` at the centre of its bin and the indices
-    ``members`` of those votes."""
+    """
+    A local maximum of the vote histogram.
+
+    Its ``strength`` (summed weight of the votes in its 3 x 3 x 3 neighbourhood), the ``pose`` at
+    the centre of its bin and the indices ``members`` of those votes.
+    """
 
     strength: float
     pose: tuple[float, float, float]
@@ -77,8 +83,8 @@ class PoseVoting:
         points, angles = np.concatenate(pos), np.concatenate(ang)
         # neighbouring nodes see the same wall patches: keep the closest view of each patch
         # (``merge_xy`` metres, ``merge_yaw`` of tangent direction)
-        key = np.column_stack((np.floor(points / merge_xy).astype(np.int64),
-                               np.floor(np.mod(angles, 2.0 * math.pi) / merge_yaw).astype(np.int64)))
+        yaw_bins = np.floor(np.mod(angles, 2.0 * math.pi) / merge_yaw).astype(np.int64)
+        key = np.column_stack((np.floor(points / merge_xy).astype(np.int64), yaw_bins))
         order = np.lexsort((np.concatenate(rng), *key.T[::-1]))
         first = np.ones(len(order), bool)
         first[1:] = np.any(key[order[1:]] != key[order[:-1]], axis=1)
@@ -108,12 +114,16 @@ class PoseVoting:
         self._n_xy = np.ceil((hi - self._lo) / self.bin_xy).astype(np.int64) + 1
 
     def orientation_histogram(self, bins: int = 180) -> np.ndarray:
-        """Histogram of the map's wall directions (modulo a half turn, ``bins`` bins), from the
-        tangents of the pooled features."""
+        """
+        Return the histogram of the map's wall directions.
+
+        Modulo a half turn, ``bins`` bins, from the tangents of the pooled features.
+        """
         return _direction_histogram(self.angles, None, bins)
 
     def vote(self, query: ScanFeatures) -> Votes:
-        """Each query point's ``neighbours`` nearest map descriptors, as pose votes.
+        """
+        Each query point's ``neighbours`` nearest map descriptors, as pose votes.
 
         A vote weighs ``1 / (1 + range / range_scale)``: near points fix the translation better
         for the same tangent error.
@@ -154,8 +164,11 @@ class PoseVoting:
                      weight=weight[inside])
 
     def peaks(self, votes: Votes, count: int) -> list[Peak]:
-        """The ``count`` strongest local maxima of the 3 x 3 x 3 box-filtered histogram (sparse:
-        only occupied bins are touched, so the cost does not grow with the map)."""
+        """
+        Return the ``count`` strongest local maxima of the 3 x 3 x 3 box-filtered histogram.
+
+        Sparse: only occupied bins are touched, so the cost does not grow with the map.
+        """
         if len(votes) == 0 or count <= 0:
             return []
         ny, na = int(self._n_xy[1]), self.n_yaw
@@ -188,7 +201,7 @@ class PoseVoting:
 
 
 def _direction_histogram(angles: np.ndarray, weights: np.ndarray | None, bins: int) -> np.ndarray:
-    """Normalized histogram of line directions (angles modulo pi), smoothed over +-1 bin."""
+    """Return normalized histogram of line directions (angles modulo pi), smoothed over +-1 bin."""
     b = np.floor(np.mod(angles, math.pi) / math.pi * bins).astype(np.int64) % bins
     h = np.bincount(b, weights=weights, minlength=bins).astype(float)
     h = h + 0.5 * (np.roll(h, 1) + np.roll(h, -1))
@@ -197,8 +210,11 @@ def _direction_histogram(angles: np.ndarray, weights: np.ndarray | None, bins: i
 
 def alignment_yaws(map_hist: np.ndarray, scan_angles: np.ndarray, scan_weights: np.ndarray | None,
                    count: int) -> np.ndarray:
-    """Yaws (modulo a half turn) that best align a scan's wall directions with the map's:
-    the ``count`` strongest local maxima of their circular cross-correlation."""
+    """
+    Yaws (modulo a half turn) that best align a scan's wall directions with the map's.
+
+    The ``count`` strongest local maxima of their circular cross-correlation.
+    """
     bins = len(map_hist)
     scan_hist = _direction_histogram(scan_angles, scan_weights, bins)
     corr = np.real(np.fft.ifft(np.fft.fft(map_hist) * np.conj(np.fft.fft(scan_hist))))

@@ -1,4 +1,5 @@
-"""Occupancy grids from range scans at known poses (hit / miss counting along each beam).
+"""
+Occupancy grids from range scans at known poses (hit / miss counting along each beam).
 
 Generic: any source of ``(ranges, poses, beam_angles)`` will do; ``io.carmen`` builds the maps of
 the CARMEN logs with it.
@@ -7,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .map_io import OccupancyMap
+from .map_limits import check_map_cells, MAX_MAP_CELLS
 from ..config.mapping import MapBuildConfig
 from ..progress import ProgressCallback
-from .map_io import OccupancyMap
-from .map_limits import MAX_MAP_CELLS, check_map_cells
 
 #: most beam samples traversed in one vectorized batch (bounds the batch's memory whatever the
 #: resolution; at the defaults it is ``chunk_beams`` beams of 1600 samples)
@@ -34,7 +35,8 @@ def build_occupancy_grid(ranges: np.ndarray, poses: np.ndarray, beam_angles: np.
                          progress: ProgressCallback | None = None,
                          max_cells: int = MAX_MAP_CELLS
                          ) -> tuple[np.ndarray, tuple[float, float, float]]:
-    """Trinary occupancy grid (int8: 100 occupied, 0 free, -1 unknown) and its origin.
+    """
+    Trinary occupancy grid (int8: 100 occupied, 0 free, -1 unknown) and its origin.
 
     ``ranges`` (S, n) with ``inf`` for no return, ``poses`` (S, 3) laser poses in the world
     frame, ``beam_angles`` (n,). Cells along each beam (sampled every half cell) count a miss,

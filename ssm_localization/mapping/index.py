@@ -1,4 +1,5 @@
-"""Topological index of a grid map (paper section III): GVD nodes with virtual 360-degree scans.
+"""
+Topological index of a grid map (paper section III): GVD nodes with virtual 360-degree scans.
 
 ``build_index`` extracts the nodes (``topology.py``), casts a virtual scan at every node
 (``raycast.py``, Table 1: the virtual laser's pose is the node pose ``(x, y, 0)`` composed with
@@ -9,25 +10,25 @@ the sensor pose on the robot) and precomputes the matcher's per-scan features
 from __future__ import annotations
 
 import dataclasses
-import zipfile
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
+import zipfile
+import zlib
 
 import numpy as np
 
+from .map_io import OccupancyMap
+from .map_limits import check_map_cells, MapTooLargeError, MAX_MAP_CELLS
+from .raycast import beam_angles as _beam_angles
+from .raycast import RayCaster
+from .topology import build_topology, count_kinds
 from ..config.mapping import IndexConfig
 from ..config.params import config_from_json, config_to_json
 from ..files.reading import clip, input_file
 from ..files.writing import atomic_files
-from ..matching.features import ScanFeatures, prepare_scan
+from ..matching.features import prepare_scan, ScanFeatures
 from ..progress import ProgressCallback
 from ..transforms import compose
-from .map_io import OccupancyMap
-from .map_limits import MAX_MAP_CELLS, MapTooLargeError, check_map_cells
-from .raycast import RayCaster
-from .raycast import beam_angles as _beam_angles
-from .topology import build_topology, count_kinds
 
 #: Version of the ``.npz`` layout written by :func:`save_index`; other versions are refused.
 FORMAT_VERSION = 1
@@ -41,14 +42,18 @@ def _empty(shape, dtype) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class MapIndex:
-    """A built index. Per node k: ``node_xy[k]`` (map frame), ``node_kind[k]``
-    (:class:`NodeKind`), ``node_sensor_pose[k]`` the virtual laser's pose (map frame),
-    ``ranges[k]`` its virtual scan over ``beam_angles`` (inf: no return), ``features[k]`` the
-    matcher features of that scan (points in the laser frame). ``gvd_mask`` (H, W) bool,
-    ``edges`` (E, 2) node pairs adjacent along the GVD, ``node_clearance`` (K,) brushfire
-    distance (m) at the nodes. (The localizer derives its wall model from ``map`` at start-up.)"""
+    """
+    A built index.
 
-    map: OccupancyMap
+    Per node k: ``node_xy[k]`` (map frame), ``node_kind[k]`` (:class:`NodeKind`),
+    ``node_sensor_pose[k]`` the virtual laser's pose (map frame), ``ranges[k]`` its virtual scan
+    over ``beam_angles`` (inf: no return), ``features[k]`` the matcher features of that scan
+    (points in the laser frame). ``gvd_mask`` (H, W) bool, ``edges`` (E, 2) node pairs adjacent
+    along the GVD, ``node_clearance`` (K,) brushfire distance (m) at the nodes. (The localizer
+    derives its wall model from ``map`` at start-up.)
+    """
+
+    map: OccupancyMap  # noqa: A003 - public field name
     node_xy: np.ndarray
     node_kind: np.ndarray
     node_sensor_pose: np.ndarray
@@ -157,8 +162,11 @@ def save_index(index: MapIndex, path: str | Path) -> Path:
 
 
 def declared_arrays(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-    """``{name: (shape, dtype)}`` of the arrays of an ``.npz`` file from their ``.npy`` headers,
-    without decompressing their data (a small file may declare gigabytes)."""
+    """
+    ``{name: (shape, dtype)}`` of the arrays of an ``.npz`` file from their ``.npy`` headers.
+
+    Without decompressing their data (a small file may declare gigabytes).
+    """
     out = {}
     with zipfile.ZipFile(path) as zf:
         for member in zf.namelist():
@@ -173,7 +181,8 @@ def declared_arrays(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
 
 def load_index(path: str | Path, expected_map: OccupancyMap | None = None,
                max_cells: int = MAX_MAP_CELLS) -> MapIndex:
-    """Read an index written by :func:`save_index` (never unpickles).
+    """
+    Read an index written by :func:`save_index` (never unpickles).
 
     Raises ``ValueError`` for a file of another format version, a corrupt file, a map of more
     than ``max_cells`` cells (0: no limit; checked from the array headers before anything is

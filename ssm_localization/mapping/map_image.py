@@ -1,4 +1,5 @@
-"""Map images (PGM/PNG and the other formats Pillow reads) -> brightness, with the size guard.
+"""
+Map images (PGM/PNG and the other formats Pillow reads) -> brightness, with the size guard.
 
 The size is read from the PNM or PNG header before Pillow sees the file, so an image declaring
 20000 x 20000 pixels is refused by :func:`~.map_limits.check_map_cells` without being decoded
@@ -7,16 +8,16 @@ corrupt images raise ``ValueError`` naming the file.
 """
 from __future__ import annotations
 
+from pathlib import Path
 import re
 import struct
 import warnings
-from pathlib import Path
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from .map_limits import check_map_cells, MapTooLargeError
 from ..files.reading import clip
-from .map_limits import MapTooLargeError, check_map_cells
 
 _PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 #: PNM header: magic, then width and height separated by white space and ``#`` comments
@@ -24,8 +25,11 @@ _PNM_HEADER = re.compile(rb'P[1-6](?:\s+|#[^\n]*\n)+(\d+)(?:\s+|#[^\n]*\n)+(\d+)
 
 
 def header_size(path: str | Path) -> tuple[int, int] | None:
-    """``(width, height)`` declared by a PNG or PNM (PGM, PPM, PBM) header; None for other
-    formats or an unreadable header (Pillow then reads it)."""
+    """
+    Return the ``(width, height)`` a PNG or PNM (PGM, PPM, PBM) header declares.
+
+    Returns None for other formats or an unreadable header (Pillow then reads it).
+    """
     with open(path, 'rb') as fh:
         head = fh.read(1024)
     if head.startswith(_PNG_SIGNATURE) and head[12:16] == b'IHDR' and len(head) >= 24:
@@ -56,9 +60,11 @@ def _decode(path: Path, max_cells: int, where: str) -> np.ndarray:
 
 
 def read_shade(path: str | Path, max_cells: int) -> np.ndarray:
-    """Brightness in [0, 1] per pixel (mean of the colour channels; alpha ignored), row 0 at
-    the top. Images of more than ``max_cells`` pixels (0: no limit) are refused before
-    decoding."""
+    """
+    Brightness in [0, 1] per pixel (mean of the colour channels; alpha ignored), row 0 at the top.
+
+    Images of more than ``max_cells`` pixels (0: no limit) are refused before decoding.
+    """
     path = Path(path)
     where = f'map image {path}'
     try:

@@ -1,4 +1,5 @@
-"""Occupancy grid maps: nav2 map_server YAML + image files and nav_msgs/OccupancyGrid messages.
+"""
+Occupancy grid maps: nav2 map_server YAML + image files and nav_msgs/OccupancyGrid messages.
 
 The grid follows nav_msgs/OccupancyGrid: ``data[r, c]`` in ``-1`` (unknown) or ``0..100``, row 0 at
 the bottom (smallest y); cell (r, c) has its centre at
@@ -7,20 +8,20 @@ so loading and saving flip the rows.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import hashlib
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
+from .map_image import read_shade
+from .map_limits import check_map_cells, MAX_MAP_CELLS
 from ..files.reading import echo, input_file
 from ..files.writing import atomic_files
 from ..files.yaml_input import load_yaml_file
 from ..transforms import apply, quaternion_to_yaw
-from .map_image import read_shade
-from .map_limits import MAX_MAP_CELLS, check_map_cells
 
 MODES = ('trinary', 'scale', 'raw')
 
@@ -34,7 +35,8 @@ def _fits_float32(v: float) -> bool:
 
 
 def canonical(v: float) -> float:
-    """The shortest decimal that rounds to the same float32 as ``v``.
+    """
+    Return the shortest decimal that rounds to the same float32 as ``v``.
 
     nav_msgs/OccupancyGrid carries the resolution and origin as float32, a map YAML file as
     decimals: ``0.05`` arrives as ``0.05000000074505806`` over the wire. Every map is stored with
@@ -115,7 +117,8 @@ class OccupancyMap:
         return (r >= 0) & (r < self.height) & (c >= 0) & (c < self.width)
 
     def checksum(self) -> str:
-        """sha256 (hex) of the cells and the geometry (shape, resolution, origin).
+        """
+        sha256 (hex) of the cells and the geometry (shape, resolution, origin).
 
         Geometry is hashed at float32 precision, as nav_msgs/OccupancyGrid carries it, so a map
         read from a YAML file and the same map received over the wire have the same checksum.
@@ -166,7 +169,8 @@ def _field(doc: dict, name: str, path: Path, kind, required: bool = True, defaul
 
 
 def load_map_yaml(path: str | Path, max_cells: int = MAX_MAP_CELLS) -> OccupancyMap:
-    """Load a nav2 map_server map (YAML + PGM/PNG), following map_server's ``loadMapFromFile``.
+    """
+    Load a nav2 map_server map (YAML + PGM/PNG), following map_server's ``loadMapFromFile``.
 
     ``p = 1 - shade`` (``shade`` if ``negate``); trinary: ``p > occupied_thresh`` -> 100,
     ``p < free_thresh`` -> 0, else -1; scale: the same with a linear 0..100 between the
@@ -184,24 +188,24 @@ def load_map_yaml(path: str | Path, max_cells: int = MAX_MAP_CELLS) -> Occupancy
     image = _field(doc, 'image', path, str)
     resolution = _field(doc, 'resolution', path, float)
     if resolution <= 0.0:
-        raise ValueError(f'{path}: field \'resolution\' must be > 0, got {resolution}')
+        raise ValueError(f"{path}: field 'resolution' must be > 0, got {resolution}")
     origin = _field(doc, 'origin', path, 'origin')
     if not all(map(_fits_float32, (resolution, *origin))):
-        raise ValueError(f'{path}: fields \'resolution\' and \'origin\' must be within float32 '
+        raise ValueError(f"{path}: fields 'resolution' and 'origin' must be within float32 "
                          f'range (|v| <= {FLOAT32_MAX:.3g}), as map messages carry them')
     negate = _field(doc, 'negate', path, bool, required=False, default=False)
     occ_t = _field(doc, 'occupied_thresh', path, float, required=False, default=0.65)
     free_t = _field(doc, 'free_thresh', path, float, required=False, default=0.25)
     if not 0.0 <= occ_t <= 1.0:
-        raise ValueError(f'{path}: field \'occupied_thresh\' must be in [0, 1], got {occ_t}')
+        raise ValueError(f"{path}: field 'occupied_thresh' must be in [0, 1], got {occ_t}")
     if not 0.0 <= free_t <= 1.0:
-        raise ValueError(f'{path}: field \'free_thresh\' must be in [0, 1], got {free_t}')
+        raise ValueError(f"{path}: field 'free_thresh' must be in [0, 1], got {free_t}")
     if free_t > occ_t:
         raise ValueError(f'{path}: free_thresh ({free_t}) must not exceed occupied_thresh '
                          f'({occ_t})')
     mode = doc.get('mode', 'trinary')
     if mode not in MODES:
-        raise ValueError(f'{path}: field \'mode\' must be one of {MODES}, got {echo(mode)}')
+        raise ValueError(f"{path}: field 'mode' must be one of {MODES}, got {echo(mode)}")
     img_path = Path(image)
     if not img_path.is_absolute():
         img_path = path.parent / img_path
@@ -230,7 +234,8 @@ def _shade_to_occupancy(shade: np.ndarray, mode: str, negate: bool, occ_t: float
 
 
 def save_map_yaml(occ_map: OccupancyMap, yaml_path: str | Path) -> Path:
-    """Write ``yaml_path`` and a trinary PGM beside it (same stem); returns the PGM path.
+    """
+    Write ``yaml_path`` and a trinary PGM beside it (same stem); returns the PGM path.
 
     Occupied (``>= 65``) -> 0, free (``0..25``) -> 254, anything else -> 205 (unknown), with
     ``occupied_thresh: 0.65``, ``free_thresh: 0.196`` as map_saver writes them. Both files are
@@ -254,7 +259,8 @@ def save_map_yaml(occ_map: OccupancyMap, yaml_path: str | Path) -> Path:
 # --------------------------------------------------------------------------- messages
 
 def occupancy_map_from_msg(msg, max_cells: int = 0) -> OccupancyMap:
-    """An :class:`OccupancyMap` from a nav_msgs/OccupancyGrid (rclpy or rosbags message).
+    """
+    Return an :class:`OccupancyMap` from a nav_msgs/OccupancyGrid (rclpy or rosbags message).
 
     A map of more than ``max_cells`` cells (0, the default: no limit) raises
     :class:`~.map_limits.MapTooLargeError` before its data is converted.

@@ -1,4 +1,5 @@
-"""The map-size guard shared by the command line, the library and the ROS nodes.
+"""
+The map-size guard shared by the command line, the library and the ROS nodes.
 
 A grid of ``width x height`` cells costs several bytes per cell to index (distance transforms,
 the GVD, float images while decoding), so oversized maps are refused by their declared size,
@@ -15,8 +16,12 @@ class MapTooLargeError(ValueError):
 
 
 def check_map_cells(width: int, height: int, max_cells: int, where: str = 'map') -> None:
-    """Raise :class:`MapTooLargeError` when ``width * height > max_cells`` (``max_cells`` 0:
-    no limit); ``ValueError`` for a negative limit. The message names ``where``."""
+    """
+    Raise :class:`MapTooLargeError` when ``width * height > max_cells``.
+
+    ``max_cells`` 0 means no limit; ``ValueError`` for a negative limit. The message names
+    ``where``.
+    """
     if max_cells < 0:
         raise ValueError(f'max_map_cells must be >= 0 (0 = no limit), got {max_cells}')
     cells = int(width) * int(height)

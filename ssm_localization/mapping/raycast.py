@@ -1,4 +1,5 @@
-"""Virtual range scans by exact grid traversal (paper section III, Table 1).
+"""
+Virtual range scans by exact grid traversal (paper section III, Table 1).
 
 Table 1 marches each beam in steps of ``Delta d``; here every beam visits exactly the cells it
 crosses (Amanatides & Woo's DDA), vectorized over all beams of all poses at once: the loop runs
@@ -14,7 +15,8 @@ from scipy import ndimage
 
 
 class RayCaster:
-    """Ray casting on one grid; precomputes the padded grid and its distance transform once.
+    """
+    Ray casting on one grid; precomputes the padded grid and its distance transform once.
 
     Beams advance by exact cell-to-cell steps (DDA); where the distance transform shows that no
     occupied cell is near, a beam first jumps ahead by a safe distance (``D - sqrt(2)`` cells
@@ -144,10 +146,12 @@ class RayCaster:
         return out
 
     def _locate(self, px, py, ux, uy, inv_x, inv_y, t, nudge):
-        """Flat padded index of the cell at ray parameter ``t`` and its next boundary crossings.
+        """
+        Flat padded index of the cell at ray parameter ``t`` and its next boundary crossings.
 
         ``nudge``: move a hair along the ray first so that ``floor`` picks the cell being
-        entered at a boundary."""
+        entered at a boundary.
+        """
         h, w = self.shape
         tt = t + 1e-9 * nudge
         col = np.clip(np.floor(px + ux * tt), -1, w).astype(np.int64)
@@ -162,7 +166,8 @@ class RayCaster:
 
 def cast_rays(occupied: np.ndarray, resolution: float, origin, sensor_poses, beam_angles,
               max_range: float) -> np.ndarray:
-    """Ranges (P, B) float64 of beams ``beam_angles`` (B,) from ``sensor_poses`` (P, 3).
+    """
+    Ranges (P, B) float64 of beams ``beam_angles`` (B,) from ``sensor_poses`` (P, 3).
 
     ``occupied`` (H, W) bool follows nav_msgs/OccupancyGrid (row 0 at the bottom); ``origin`` is
     the grid's ``(x, y, yaw)``; poses are in the map frame, beam angles relative to the sensor.

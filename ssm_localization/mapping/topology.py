@@ -1,4 +1,5 @@
-"""Topological map of a grid map: brushfire distance, GVD and nodes (paper section III).
+"""
+Topological map of a grid map: brushfire distance, GVD and nodes (paper section III).
 
 Algorithm (all vectorized numpy/scipy):
 
@@ -17,20 +18,20 @@ Algorithm (all vectorized numpy/scipy):
    than ``max(min_spur_length, spur_factor * clearance of their junction)`` are removed, that
    limit times ``weak_spur_factor`` for weak arcs (obstacle points subtending < 60 deg on most
    pixels: wall noise); so are free-standing weak arcs and skeleton pieces shorter than
-   ``min_spur_length``. Repeated until stable. Known limit: where a doorway opens into a room deeper than ~1/ridge_ratio door
-   widths the arc through the door can break; the room's GVD then ends in dead-end nodes.
-4. Nodes: *branch* nodes where three or more arcs meet (the paper's only kind; nodes closer than
-   ``merge_radius`` are merged), plus configurable extras that cover places where branch nodes
-   alone fail: *dead ends* of arcs, one *region* node (at the point of maximum clearance) for
-   every GVD component / free region without a node, and *arc* nodes spaced at most
-   ``arc_spacing`` apart along the GVD (farthest-point sampling by geodesic distance).
-5. Edges link nodes whose GVD territories (geodesic Voronoi cells on the skeleton) touch.
+   ``min_spur_length``. Repeated until stable. Known limit: where a doorway opens into a room
+   deeper than ~1/ridge_ratio door widths the arc through the door can break; the room's GVD then
+   ends in dead-end nodes. 4. Nodes: *branch* nodes where three or more arcs meet (the paper's only
+   kind; nodes closer than ``merge_radius`` are merged), plus configurable extras that cover places
+   where branch nodes alone fail: *dead ends* of arcs, one *region* node (at the point of maximum
+   clearance) for every GVD component / free region without a node, and *arc* nodes spaced at most
+   ``arc_spacing`` apart along the GVD (farthest-point sampling by geodesic distance). 5. Edges
+   link nodes whose GVD territories (geodesic Voronoi cells on the skeleton) touch.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from enum import IntEnum
+import math
 
 import numpy as np
 from scipy import ndimage
@@ -38,9 +39,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from .map_io import OccupancyMap
 from ..config.mapping import TopologyConfig
 from ..progress import ProgressCallback
-from .map_io import OccupancyMap
 
 
 class NodeKind(IntEnum):
@@ -57,8 +58,12 @@ NODE_KIND_NAMES: tuple[str, ...] = tuple(k.name.lower() for k in NodeKind)
 
 @dataclass(frozen=True, eq=False)
 class Topology:
-    """Nodes and GVD of a map. ``node_cell`` are (row, col) grid cells, ``clearance`` (H, W) the
-    brushfire distance in metres (0 on obstacles), ``edges`` (E, 2) node index pairs."""
+    """
+    Nodes and GVD of a map.
+
+    ``node_cell`` are (row, col) grid cells, ``clearance`` (H, W) the brushfire distance in metres
+    (0 on obstacles), ``edges`` (E, 2) node index pairs.
+    """
 
     node_xy: np.ndarray
     node_kind: np.ndarray
@@ -89,7 +94,7 @@ def _bits(n: int) -> list[bool]:
 
 
 def _guo_hall(n: int, first: bool) -> bool:
-    """True when the centre pixel may be deleted (Guo & Hall 1989, two-subiteration A1)."""
+    """Return True when the centre pixel may be deleted (Guo & Hall 1989, two-subiteration A1)."""
     x = _bits(n) + _bits(n)[:1]  # x[0..8], x[8] = x1
     c = sum((not x[2 * i]) and (x[2 * i + 1] or x[2 * i + 2]) for i in range(4))
     n1 = sum(x[2 * k] or x[2 * k + 1] for k in range(4))
@@ -132,7 +137,8 @@ def _thin(mask: np.ndarray, ring: np.ndarray) -> None:
 
 
 def _graph(idx: np.ndarray, mask: np.ndarray, w: int):
-    """Sparse symmetric 8-neighbour graph over the sorted flat pixel indices ``idx``.
+    """
+    Sparse symmetric 8-neighbour graph over the sorted flat pixel indices ``idx``.
 
     Returns the csr graph (weights in cells) and each undirected edge once (``er``, ``ec``).
     """
@@ -198,7 +204,7 @@ def _analyse(mask: np.ndarray, w: int) -> _Skeleton:
 
 
 def _to_cells(res: float):
-    """metres -> cells, rounded to 4 decimals (area: apply it twice)."""
+    """Convert metres -> cells, rounded to 4 decimals (area: apply it twice)."""
     return lambda metres: round(float(metres) / res, 4)
 
 

@@ -1,4 +1,5 @@
-"""Rotation-invariant local descriptors and tentative correspondences L (paper II.B).
+"""
+Rotation-invariant local descriptors and tentative correspondences L (paper II.B).
 
 The paper does not say how L is built; all n x m pairs would make G far too big. Each point gets a
 small log-polar histogram (a shape context) of its neighbours within a radius, expressed in the
@@ -14,7 +15,10 @@ import numpy as np
 def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radial_bins: int,
                   angular_bins: int, context: np.ndarray | None = None,
                   offsets=None, weights: np.ndarray | None = None) -> np.ndarray:
-    """(N, radial_bins * angular_bins) float32 descriptors, Hellinger-normalised (unit L2 norm).
+    """
+    Return (N, radial_bins * angular_bins) float32 descriptors, Hellinger-normalised.
+
+    Each row has unit L2 norm.
 
     Neighbour ``j`` of point ``i`` (``0 < d_ij < radius``) is binned by ``log2(d_ij)`` (radial
     edges ``radius / 2**k``) and by its bearing in the frame (u_i, n_i); the bearing vote is split
@@ -69,7 +73,8 @@ def descriptor_distances(ref_desc: np.ndarray, new_desc: np.ndarray) -> np.ndarr
 
 def candidates(ref_desc: np.ndarray, new_desc: np.ndarray, k: int,
                both_ways: bool = False) -> np.ndarray:
-    """Tentative correspondences L as an (|L|, 2) int array of (ref index i, new index i').
+    """
+    Tentative correspondences L as an (|L|, 2) int array of (ref index i, new index i').
 
     For each new point its ``k`` nearest reference descriptors; with ``both_ways`` also each
     reference point's ``k`` nearest new descriptors (union). Sorted by (i', i), no duplicates.

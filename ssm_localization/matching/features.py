@@ -1,27 +1,29 @@
-"""The per-scan features the matcher precomputes once (paper section II.A-B).
+"""
+The per-scan features the matcher precomputes once (paper section II.A-B).
 
 ``ScanFeatures`` holds plain numpy arrays (npz-friendly, no pickles: ``to_arrays`` /
 ``from_arrays``, as a map index stores them); ``prepare_scan`` builds them from a scan's points.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from functools import cached_property
+import math
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..config.matcher import MatcherConfig
 from .descriptors import shape_context
 from .pairwise import angle_table, distance_table
 from .scan import (as_points, downsample_even, length_weights, local_normals, robust_tangents,
                    sweep_direction, tangents)
+from ..config.matcher import MatcherConfig
 
 
 @dataclass(frozen=True, eq=False)
 class ScanFeatures:
-    """What the matcher needs of one scan; plain numpy arrays (npz-friendly, no pickle).
+    """
+    What the matcher needs of one scan; plain numpy arrays (npz-friendly, no pickle).
 
     ``points (N, 2)`` the downsampled points (scan frame), ``tangents (N, 2)`` (eq. 1),
     ``descriptors (N, D)`` (rotation-invariant local descriptors, ``descriptors.py``),
@@ -72,7 +74,7 @@ class ScanFeatures:
         return cKDTree(self.fine_points)
 
     def to_arrays(self, prefix: str = '') -> dict[str, np.ndarray]:
-        """The stored fields as ``{prefix + name: array}`` (for ``np.savez``)."""
+        """Return the stored fields as ``{prefix + name: array}`` (for ``np.savez``)."""
         return {prefix + f.name: np.asarray(getattr(self, f.name)) for f in fields(self)}
 
     @classmethod
@@ -96,8 +98,10 @@ class ScanFeatures:
 
 
 def prepare_scan(points_xy, config: MatcherConfig | None = None) -> ScanFeatures:
-    """Downsample, tangents (eq. 1) and descriptors of one scan (points in scan order, metres,
-    sensor at the origin).
+    """
+    Prepare one scan: downsample, tangents (eq. 1) and descriptors.
+
+    Points in scan order, metres, sensor at the origin.
 
     Non-finite points are dropped; fewer than 3 points give features with ``is_degenerate``
     (the matcher then returns an empty result). Three spatially even subsets are taken: the

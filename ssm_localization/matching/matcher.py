@@ -1,4 +1,5 @@
-"""Spectral scan matching (paper section II): public API ``match_scans``.
+"""
+Spectral scan matching (paper section II): public API ``match_scans``.
 
 Pipeline: ``prepare_scan`` (downsample, tangents eq. 1, descriptors) -> tentative correspondences
 L (descriptor top-k) -> affinity G (eqs. 2-4) -> leading eigenvector + greedy binarization
@@ -14,31 +15,34 @@ icp_max_points, icp_min_spacing, normal_radius. See ``config.matcher.PREPARE_FIE
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
-from ..config.matcher import MatcherConfig
-from ..transforms import apply
 from .descriptors import candidates
-from .features import ScanFeatures, prepare_scan
+from .features import prepare_scan, ScanFeatures
 from .pairwise import affinity_matrix
 from .ransac import icp_point_to_line, mutual_nn_procrustes, ransac_hypotheses
 from .scan import as_points
 from .spectral import binarize, leading_eigenvector, matching_score
+from ..config.matcher import MatcherConfig
+from ..transforms import apply
 
 __all__ = ['MatchResult', 'match_scans', 'match_features', 'spectral_score', 'spectral_solution']
 
 
 @dataclass(frozen=True)
 class MatchResult:
-    """``pose`` (x, y, yaw): ``p_ref ~= R(yaw) @ p_new + (x, y)``; ``pairs`` (K, 2) consistent
-    correspondences (binarized eq. 6) as indices into the caller's ref / new arrays; ``score`` eq. 5
-    at that solution; ``inliers`` (K_in, 2) the pairs supporting the pose; ``ok`` whether the
-    estimate is trustworthy (enough inliers); ``overlap`` the fraction of the new scan's points
-    within ``overlap_dist`` of the reference at ``pose``. ``pose`` is NaN when nothing could be
-    estimated."""
+    """
+    ``pose`` (x, y, yaw).
+
+    ``p_ref ~= R(yaw) @ p_new + (x, y)``; ``pairs`` (K, 2) consistent correspondences (binarized
+    eq. 6) as indices into the caller's ref / new arrays; ``score`` eq. 5 at that solution;
+    ``inliers`` (K_in, 2) the pairs supporting the pose; ``ok`` whether the estimate is trustworthy
+    (enough inliers); ``overlap`` the fraction of the new scan's points within ``overlap_dist`` of
+    the reference at ``pose``. ``pose`` is NaN when nothing could be estimated.
+    """
 
     pose: tuple[float, float, float]
     pairs: np.ndarray
@@ -72,7 +76,8 @@ def _spectral(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig):
 
 
 def spectral_solution(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig | None = None):
-    """Eqs. (2)-(6) for two prepared scans: ``(L, G, x*, selection, E)``, or None if degenerate.
+    """
+    Eqs. (2)-(6) for two prepared scans: ``(L, G, x*, selection, E)``, or None if degenerate.
 
     Pass it to :func:`match_features` as ``solution`` to reuse the coarse stage's work.
     """
@@ -84,8 +89,12 @@ def spectral_solution(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfi
 
 def spectral_score(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig | None = None,
                    solution=None) -> tuple[float, np.ndarray]:
-    """Coarse stage: ``(E, pairs)`` with E = eq. 5 at the binarized eq. 6 solution and ``pairs``
-    (K, 2) indices into the callers' arrays (``source_index``). ``(0.0, empty)`` if degenerate."""
+    """
+    Coarse stage: return the spectral score and the consistent pairs.
+
+    ``(E, pairs)`` with E = eq. 5 at the binarized eq. 6 solution and ``pairs`` (K, 2) indices into
+    the callers' arrays (``source_index``). ``(0.0, empty)`` if degenerate.
+    """
     solution = solution or spectral_solution(ref, new, config)
     if solution is None:
         return 0.0, np.zeros((0, 2), dtype=np.int64)
@@ -95,8 +104,7 @@ def spectral_score(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig |
 
 
 def overlap(ref: ScanFeatures, new: ScanFeatures, pose, dist: float) -> float:
-    """Fraction of the new scan's ICP points within ``dist`` of a reference ICP point at
-    ``pose``."""
+    """Return the fraction of new ICP points within ``dist`` of a reference one at ``pose``."""
     if len(new.fine_points) == 0 or len(ref.fine_points) == 0:
         return 0.0
     d, _ = ref.fine_tree.query(apply(pose, new.fine_points), distance_upper_bound=dist)
@@ -123,7 +131,8 @@ def _refine(ref: ScanFeatures, new: ScanFeatures, pose, config: MatcherConfig):
 
 def _estimate(ref: ScanFeatures, new: ScanFeatures, q: np.ndarray, xq: np.ndarray,
               config: MatcherConfig):
-    """RANSAC (II.C) on the consistent pairs ``q`` (eigenvector values ``xq``), then ICP.
+    """
+    RANSAC (II.C) on the consistent pairs ``q`` (eigenvector values ``xq``), then ICP.
 
     If the best hypothesis explains less than ``retry_overlap`` of the new scan, the next
     distinct hypotheses (up to ``ransac_hypotheses``) are refined too and the one with the
@@ -153,7 +162,8 @@ def _estimate(ref: ScanFeatures, new: ScanFeatures, q: np.ndarray, xq: np.ndarra
 
 def match_features(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig | None = None,
                    solution=None) -> MatchResult:
-    """Match two prepared scans; never raises on degenerate input (returns ``ok=False``).
+    """
+    Match two prepared scans; never raises on degenerate input (returns ``ok=False``).
 
     Beyond the paper: when the pose explains less than ``retry_overlap`` of the new scan, the
     next distinct RANSAC hypotheses are refined (``ransac_hypotheses``), then the inliers of that
@@ -206,7 +216,8 @@ def match_features(ref: ScanFeatures, new: ScanFeatures, config: MatcherConfig |
 
 
 def match_scans(ref_xy, new_xy, config: MatcherConfig | None = None) -> MatchResult:
-    """Pose of the new scan in the reference scan's frame: ``p_ref ~= R(yaw) @ p_new + (x, y)``.
+    """
+    Pose of the new scan in the reference scan's frame: ``p_ref ~= R(yaw) @ p_new + (x, y)``.
 
     ``ref_xy`` (N, 2) and ``new_xy`` (M, 2): points in scan order, metres. Raises ``ValueError``
     for arrays that are not (N, 2); fewer than 3 finite points, all-invalid or collinear scans

@@ -36,7 +36,8 @@ def potential(g: np.ndarray, w) -> np.ndarray:
 def affinity_matrix(ref_dist: np.ndarray, ref_angle: np.ndarray, new_dist: np.ndarray,
                     new_angle: np.ndarray, pairs: np.ndarray, w, max_dist_deform: float,
                     max_angle_deform: float) -> np.ndarray:
-    """Dense symmetric affinity G (|L|, |L|) float32 over tentative correspondences ``pairs``.
+    """
+    Dense symmetric affinity G (|L|, |L|) float32 over tentative correspondences ``pairs``.
 
     ``G_ab`` is eq. 4 of the deformation (eq. 3) between a = (i, i') and b = (j, j'), set to 0 on
     the diagonal, for conflicting pairs (i = j or i' = j': the one-to-one mapping constraint) and

@@ -1,4 +1,5 @@
-"""Pose estimation (paper II.C): 2-point RANSAC (eqs. 7-8), least squares, point-to-line ICP.
+"""
+Pose estimation (paper II.C): 2-point RANSAC (eqs. 7-8), least squares, point-to-line ICP.
 
 All poses are ``(x, y, yaw)`` with ``p_ref = R(yaw) @ p_new + (x, y)``.
 """
@@ -13,7 +14,8 @@ from ..transforms import apply, compose, inverse
 
 
 def two_point_poses(ref_a, new_a, ref_b, new_b) -> np.ndarray:
-    """Poses (H, 3) from correspondence pairs a = (i, i') and b = (j, j'), vectorized.
+    """
+    Poses (H, 3) from correspondence pairs a = (i, i') and b = (j, j'), vectorized.
 
     eq. 8: ``A = x_i' - x_j'``, ``B = y_i' - y_j'``, ``C = x_i - x_j``, ``D = y_i - y_j``,
     ``theta = atan2(AD - BC, AC + BD)``; eq. 7 then gives ``t = p_i - R(theta) p_i'``.
@@ -50,7 +52,8 @@ def ransac_hypotheses(ref: np.ndarray, new: np.ndarray, threshold: float, iterat
                       rng: np.random.Generator, min_span: float = 0.2,
                       weights: np.ndarray | None = None, n_best: int = 1,
                       distinct: tuple[float, float] = (0.3, 0.1)) -> list:
-    """2-point RANSAC over correspondences ``ref[k] <-> new[k]`` (II.C steps 1-4).
+    """
+    2-point RANSAC over correspondences ``ref[k] <-> new[k]`` (II.C steps 1-4).
 
     All ``iterations`` hypotheses are drawn and scored at once (eqs. 7-8); pairs closer than
     ``min_span`` or whose lengths differ by more than ``2 * threshold`` are skipped. Hypotheses
@@ -120,8 +123,11 @@ def ransac_hypotheses(ref: np.ndarray, new: np.ndarray, threshold: float, iterat
 def ransac_pose(ref: np.ndarray, new: np.ndarray, threshold: float, iterations: int,
                 rng: np.random.Generator, min_span: float = 0.2,
                 weights: np.ndarray | None = None):
-    """The best hypothesis of :func:`ransac_hypotheses`: ``(pose, inlier_mask)`` or
-    ``(None, empty mask)``."""
+    """
+    Return the best hypothesis of :func:`ransac_hypotheses`.
+
+    ``(pose, inlier_mask)`` or ``(None, empty mask)``.
+    """
     hyps = ransac_hypotheses(ref, new, threshold, iterations, rng, min_span, weights, 1)
     return hyps[0] if hyps else (None, np.zeros(len(ref), dtype=bool))
 
@@ -130,7 +136,8 @@ def icp_point_to_line(ref: np.ndarray, ref_normals: np.ndarray, new: np.ndarray,
                       iterations: int = 15, max_dist: float = 0.3, min_dist: float = 0.05,
                       ref_weights: np.ndarray | None = None, tree=None, damping: float = 1e-4,
                       tol: float = 1e-5, max_step: tuple[float, float] = (0.05, 0.03)):
-    """Refine ``pose`` by point-to-line ICP (beyond the paper: real scans do not share points).
+    """
+    Refine ``pose`` by point-to-line ICP (beyond the paper: real scans do not share points).
 
     Each iteration pairs every transformed new point with its nearest reference point (k-d tree),
     keeps pairs closer than a gate (``max_dist`` first, then 3x the median pair distance clipped
@@ -182,10 +189,13 @@ def icp_point_to_line(ref: np.ndarray, ref_normals: np.ndarray, new: np.ndarray,
 
 def mutual_nn_procrustes(ref: np.ndarray, new: np.ndarray, pose, gate: float,
                          iterations: int = 2, ref_tree=None, new_tree=None):
-    """Polish ``pose`` by point-to-point least squares on mutual nearest neighbours closer than
-    ``gate`` (closed-form Procrustes, ``iterations`` times). Where both scans sample the same
-    points this removes the along-wall freedom point-to-line ICP leaves. Returns
-    ``(pose, n_pairs)``; the input pose if fewer than 3 pairs are found."""
+    """
+    Polish ``pose`` by point-to-point least squares on mutual nearest neighbours.
+
+    Pairs closer than ``gate``; closed-form Procrustes, ``iterations`` times. Where both scans
+    sample the same points this removes the along-wall freedom point-to-line ICP leaves.
+    Returns ``(pose, n_pairs)``; the input pose if fewer than 3 pairs are found.
+    """
     pose = tuple(float(v) for v in pose)
     if len(ref) < 3 or len(new) < 3:
         return pose, 0

@@ -1,4 +1,5 @@
-"""Scan geometry for spectral scan matching (paper section II.A).
+"""
+Scan geometry for spectral scan matching (paper section II.A).
 
 ranges -> points (``ranges_to_points``), spatially even downsampling to a point budget
 (``downsample_even``), tangents (eq. 1 ``tangents``, and the robust PCA form
@@ -14,7 +15,8 @@ import numpy as np
 
 def ranges_to_points(ranges, angle_min: float, angle_increment: float, range_min: float = 0.0,
                      range_max: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
-    """Convert LaserScan ranges to ``(points (N, 2), index (N,))`` in the laser frame.
+    """
+    Convert LaserScan ranges to ``(points (N, 2), index (N,))`` in the laser frame.
 
     Beam ``b`` is at ``angle_min + b * angle_increment`` (negative increments allowed). Drops
     NaN, +-inf, non-positive readings and readings outside ``[range_min, range_max]``. Points are
@@ -42,7 +44,8 @@ def ranges_to_points(ranges, angle_min: float, angle_increment: float, range_min
 
 
 def sweep_direction(points: np.ndarray) -> float:
-    """+1 if the points sweep counterclockwise about the origin in array order, else -1.
+    """
+    +1 if the points sweep counterclockwise about the origin in array order, else -1.
 
     Majority vote over consecutive points less than 0.2 rad apart in bearing, so jumps and
     outliers interleaved in scan order do not flip it.
@@ -59,8 +62,11 @@ def sweep_direction(points: np.ndarray) -> float:
 
 
 def _voxel_select(points: np.ndarray, cell: float) -> np.ndarray:
-    """One point per occupied square cell of side ``cell`` (the one nearest the cell's centroid),
-    returned as ascending indices (scan order kept)."""
+    """
+    Return one point per occupied square cell of side ``cell``.
+
+    The point nearest the cell's centroid is kept; ascending indices (scan order kept).
+    """
     key = np.floor(points / cell).astype(np.int64)
     key -= key.min(axis=0)
     code = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]
@@ -77,7 +83,8 @@ def _voxel_select(points: np.ndarray, cell: float) -> np.ndarray:
 
 
 def downsample_even(points: np.ndarray, budget: int, min_spacing: float = 0.0) -> np.ndarray:
-    """Indices (ascending: scan order kept) of at most ``budget`` spatially even points.
+    """
+    Return indices (ascending: scan order kept) of at most ``budget`` spatially even points.
 
     Voxel-grid selection (one point per cell, nearest the cell centroid) with cell side
     ``min_spacing``, grown until at most ``budget`` cells are occupied. Unlike a walk along the
@@ -104,7 +111,8 @@ def downsample_even(points: np.ndarray, budget: int, min_spacing: float = 0.0) -
 
 
 def tangents(points: np.ndarray, gap: float, direction: float = 1.0) -> np.ndarray:
-    """Unit tangents ``u_i = (p_{i+1} - p_{i-1}) / ||.||`` (eq. 1), shape (N, 2).
+    """
+    Return unit tangents ``u_i = (p_{i+1} - p_{i-1}) / ||.||`` (eq. 1), shape (N, 2).
 
     A neighbour farther than ``gap`` (a jump to another surface) is replaced by the point itself
     (one-sided difference), as are the missing neighbours at the scan ends. A point isolated on
@@ -134,8 +142,11 @@ def tangents(points: np.ndarray, gap: float, direction: float = 1.0) -> np.ndarr
 
 
 def principal_axes(cxx, cxy, cyy) -> tuple[np.ndarray, np.ndarray]:
-    """PCA of N 2x2 covariances ``[[cxx, cxy], [cxy, cyy]]`` (batched ``numpy.linalg.eigh``):
-    eigenvalues (N, 2) ascending and the unit principal direction (N, 2), of arbitrary sign."""
+    """
+    PCA of N 2x2 covariances ``[[cxx, cxy], [cxy, cyy]]`` (batched ``numpy.linalg.eigh``).
+
+    Eigenvalues (N, 2) ascending and the unit principal direction (N, 2), of arbitrary sign.
+    """
     cov = np.stack((np.stack((cxx, cxy), axis=-1), np.stack((cxy, cyy), axis=-1)), axis=-2)
     evals, evecs = np.linalg.eigh(cov)
     return evals, np.ascontiguousarray(evecs[..., 1])
@@ -143,7 +154,8 @@ def principal_axes(cxx, cxy, cyy) -> tuple[np.ndarray, np.ndarray]:
 
 def local_normals(points: np.ndarray, radius: float, half_window: int = 4,
                   max_radius: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals (N, 2) by PCA of the scan-order neighbours within ``radius`` and weights (N,).
+    """
+    Return unit normals (N, 2) by PCA of the neighbours within ``radius``, and weights (N,).
 
     Neighbours are taken among the ``half_window`` points on each side (scan order) that lie
     within ``radius`` -- grown to 3x the distance to the nearest scan neighbour, at most
@@ -192,8 +204,12 @@ def local_normals(points: np.ndarray, radius: float, half_window: int = 4,
 
 
 def length_weights(points: np.ndarray, spacing: float, cap: float) -> np.ndarray:
-    """Scan length each point stands for: the distance to its nearer scan-order neighbour,
-    clipped to ``[spacing, cap]`` (so isolated points and jumps count at most ``cap``)."""
+    """
+    Scan length each point stands for.
+
+    The distance to its nearer scan-order neighbour, clipped to ``[spacing, cap]`` (so isolated
+    points and jumps count at most ``cap``).
+    """
     n = len(points)
     if n < 2:
         return np.full(n, spacing)
@@ -205,7 +221,8 @@ def length_weights(points: np.ndarray, spacing: float, cap: float) -> np.ndarray
 def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
                     direction: float = 1.0, offsets=None, min_neighbours: int = 4,
                     max_radius: float = 1.0) -> np.ndarray:
-    """Unit tangents (N, 2) at ``points`` from a PCA of the ``context`` points within ``radius``.
+    """
+    Return unit tangents (N, 2) at ``points``: PCA of the ``context`` points within ``radius``.
 
     The noise- and outlier-robust form of eq. 1 used by default: the principal direction of the
     neighbourhood, oriented like ``p_{i+1} - p_{i-1}`` would be for a counterclockwise sweep

@@ -6,7 +6,8 @@ import numpy as np
 
 def leading_eigenvector(G: np.ndarray, iters: int = 50, tol: float = 1e-5,
                         x0: np.ndarray | None = None) -> np.ndarray:
-    """Unit Perron vector of a non-negative symmetric G by power iteration (relaxed eq. 6).
+    """
+    Return unit Perron vector of a non-negative symmetric G by power iteration (relaxed eq. 6).
 
     Warm-started from ``x0`` (default: uniform); the result is non-negative (Perron-Frobenius),
     all zeros when G is 0.
@@ -32,7 +33,8 @@ def leading_eigenvector(G: np.ndarray, iters: int = 50, tol: float = 1e-5,
 
 
 def binarize(x: np.ndarray, pairs: np.ndarray, min_ratio: float = 0.0) -> np.ndarray:
-    """Greedy discretisation of x* (II.B steps 1-3); returns indices into ``pairs``.
+    """
+    Greedy discretisation of x* (II.B steps 1-3); returns indices into ``pairs``.
 
     Walk the candidates once in decreasing x*: accept a = (i, i') unless i or i' is already used
     (step 2 removes exactly those), stop at x* = 0 or below ``min_ratio * max(x*)`` (step 1).

@@ -1,4 +1,5 @@
-"""Conversions between ROS 2 messages and the ROS-free core types.
+"""
+Conversions between ROS 2 messages and the ROS-free core types.
 
 LaserScan -> ``localize_scan`` arguments, :class:`OccupancyMap` -> OccupancyGrid (the other way is
 the core's duck-typed ``mapping.map_io.occupancy_map_from_msg``),
@@ -8,16 +9,15 @@ Everything here is a plain function of its inputs (no node, no I/O).
 from __future__ import annotations
 
 import array
-import math
 from dataclasses import dataclass
+import math
 from typing import Any
 
-import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Pose, PoseStamped, PoseWithCovarianceStamped, Quaternion
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped, PoseWithCovarianceStamped, Quaternion
 from nav_msgs.msg import OccupancyGrid
+import numpy as np
 from sensor_msgs.msg import LaserScan
-
 from ssm_localization.transforms import quaternion_to_yaw, yaw_to_quaternion
 
 # Index of x, y, yaw in the row-major 6x6 covariance of geometry_msgs (x, y, z, roll, pitch, yaw).
@@ -40,13 +40,13 @@ class ScanArgs:
 
 
 def scan_args_from_msg(msg: LaserScan) -> ScanArgs:
-    """LaserScan -> :class:`ScanArgs` (float64 ranges, unvalidated: see :func:`scan_problem`)."""
+    """Convert LaserScan -> :class:`ScanArgs` (float64, unvalidated: :func:`scan_problem`)."""
     return ScanArgs(np.asarray(msg.ranges, dtype=np.float64), float(msg.angle_min),
                     float(msg.angle_increment), float(msg.range_min), float(msg.range_max))
 
 
 def scan_problem(args: ScanArgs, min_points: int = 3) -> str | None:
-    """Why a scan cannot be localized (a short human-readable reason), or None when it is usable."""
+    """Return why a scan cannot be localized (a short reason), or None when it is usable."""
     n = args.ranges.size
     if n == 0:
         return 'empty scan (no ranges)'
@@ -84,7 +84,7 @@ def scan_points(args: ScanArgs) -> np.ndarray:
 # --- time --------------------------------------------------------------------------------------
 
 def stamp_to_ns(stamp: Any) -> int:
-    """A builtin_interfaces/Time, int nanoseconds or float seconds -> int nanoseconds."""
+    """Return a builtin_interfaces/Time, int nanoseconds or float seconds -> int nanoseconds."""
     if hasattr(stamp, 'sec') and hasattr(stamp, 'nanosec'):
         return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
     if isinstance(stamp, (int, np.integer)):
@@ -93,7 +93,7 @@ def stamp_to_ns(stamp: Any) -> int:
 
 
 def time_msg(stamp: Any) -> Time:
-    """int nanoseconds / float seconds / Time -> builtin_interfaces/Time."""
+    """Convert int nanoseconds / float seconds / Time -> builtin_interfaces/Time."""
     ns = stamp_to_ns(stamp)
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
@@ -105,7 +105,7 @@ def stamp_to_sec(stamp: Any) -> float:
 # --- maps --------------------------------------------------------------------------------------
 
 def occupancy_grid_from_map(occ_map, stamp: Any = 0, frame_id: str | None = None) -> OccupancyGrid:
-    """OccupancyMap -> OccupancyGrid (row 0 = bottom row, as both use)."""
+    """Convert OccupancyMap -> OccupancyGrid (row 0 = bottom row, as both use)."""
     data = np.asarray(occ_map.data, dtype=np.int8)
     height, width = data.shape
     msg = OccupancyGrid()
@@ -150,8 +150,19 @@ def pose_stamped(pose, stamp: Any, frame_id: str) -> PoseStamped:
     return msg
 
 
+def pose_array(poses, stamp: Any, frame_id: str) -> PoseArray:
+    """(x, y, yaw) poses -> geometry_msgs/PoseArray (non-finite poses are left out)."""
+    msg = PoseArray()
+    msg.header.stamp = time_msg(stamp)
+    msg.header.frame_id = frame_id
+    msg.poses = [pose_msg(p) for p in poses
+                 if p is not None and all(math.isfinite(float(v)) for v in p)]
+    return msg
+
+
 def covariance6(cov3) -> list[float]:
-    """3x3 (x, y, yaw) covariance -> row-major 6x6 list; z/roll/pitch get a tiny variance.
+    """
+    3x3 (x, y, yaw) covariance -> row-major 6x6 list; z/roll/pitch get a tiny variance.
 
     Non-finite entries (no estimate) become a large variance so consumers never see NaN.
     """

@@ -1,312 +1,534 @@
-"""``global_localizer`` node: single-scan global localization as a ROS 2 service / stream.
+"""
+``global_localizer`` lifecycle node: single-scan global localization for nav2 and scripts.
 
-Interfaces (docs INTERFACES.md):
-- subscribes ``scan`` (sensor_msgs/LaserScan, sensor-data QoS) and, unless ``index_file`` names
-  an existing index, ``map`` (nav_msgs/OccupancyGrid, reliable + transient-local);
-- publishes ``global_pose`` (geometry_msgs/PoseWithCovarianceStamped, transient-local; stamped
-  with the scan's stamp, frame = ``map_frame`` or the map's frame_id), the same on
-  ``initialpose`` when ``publish_initialpose`` is true, and ``topological_map`` (MarkerArray);
-- serves ``relocalize`` (std_srvs/Trigger): localizes the next scan received after the call.
+Lifecycle (rclpy.lifecycle; ``NODE/get_state``, ``NODE/change_state``):
 
-Modes: ``on_demand`` (service only) and ``continuous`` (every scan, or at most ``rate`` Hz;
-always the newest scan, scans arriving while busy are dropped). Indexing and localization run
-off the executor threads, so the service answers while a map is being indexed; the localizer is
-swapped atomically once a new index is complete. Bad input is logged and skipped.
+- unconfigured: parameters declared and validated; the services answer that the node is not
+  active. With ``autostart`` (default) the node configures and activates itself;
+- configure: reads the parameters, loads ``index_file`` or waits for a map on ``map`` (both are
+  watched: see :mod:`ssm_localization.ros.index_source`), creates the publishers;
+- activate: scans are taken, the services localize, ``continuous`` mode runs,
+  ``localize_on_start`` localizes the first scans until an ``ok`` pose, ``/diagnostics`` ticks;
+- deactivate / cleanup / shutdown undo those steps; waiting calls get an answer saying why.
+
+Interfaces (docs INTERFACES.md): subscribes ``scan`` (LaserScan, sensor-data QoS) and ``map``
+(OccupancyGrid, transient local); publishes ``global_pose`` (PoseWithCovarianceStamped,
+transient local), ``initialpose`` (with ``publish_initialpose``), ``candidates`` (PoseArray,
+transient local), ``topological_map`` (MarkerArray, transient local) and ``/diagnostics``;
+serves ``relocalize`` (std_srvs/Trigger) and ``global_localization`` (std_srvs/Empty), both
+"localize the next scan and publish".
 """
 from __future__ import annotations
 
+from concurrent.futures import TimeoutError as FutureTimeout
+import copy
+import dataclasses
 import math
+from pathlib import Path
 import threading
 import time
-from pathlib import Path
 from typing import Any
 
-from geometry_msgs.msg import PoseWithCovarianceStamped
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
-from std_srvs.srv import Trigger
-from visualization_msgs.msg import MarkerArray
-
 from ssm_localization.config import IndexConfig, LocalizerConfig
 from ssm_localization.localization.localizer import GlobalLocalizer
 from ssm_localization.mapping.index import build_index, load_index, save_index
 from ssm_localization.ros import markers
-from ssm_localization.ros.conversions import (pose_with_covariance, scan_args_from_msg,
-                                              scan_points, scan_problem)
+from ssm_localization.ros.conversions import (pose_array, pose_with_covariance, scan_args_from_msg,
+                                              scan_points, scan_problem, ScanArgs)
+from ssm_localization.ros.diagnostics import diagnostic_array, localization_status
 from ssm_localization.ros.executor import spin
 from ssm_localization.ros.index_builder import IndexBuilder
+from ssm_localization.ros.index_source import IndexSource, ServedIndex
+from ssm_localization.ros.laser_pose import LaserMount, LaserPoseSource
+from ssm_localization.ros.lifecycle import (answer_invalid_transitions, FAILURE,
+                                            schedule_autostart, state_id, state_label, SUCCESS,
+                                            transition, UNCONFIGURED)
 from ssm_localization.ros.maps import usable_map
-from ssm_localization.ros.parameters import (DYNAMIC, build_config, declare_table,
-                                             laser_pose_of, localizer_parameters)
-from ssm_localization.ros.qos import LATCHED_QOS
+from ssm_localization.ros.parameter_guard import ParameterGuard
+from ssm_localization.ros.parameters import (build_config, DYNAMIC, laser_pose_of,
+                                             localizer_parameters)
+from ssm_localization.ros.qos import LATCHED_QOS, SERVICE_QOS
+from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox
+from std_srvs.srv import Empty, Trigger
+from visualization_msgs.msg import MarkerArray
 
 MODES = ('on_demand', 'continuous')
-MARKER_PERIOD = 1.0   # seconds between marker updates in continuous mode
-EXECUTOR_THREADS = 8
-MAX_WAITING_CALLS = EXECUTOR_THREADS - 3   # relocalize calls blocked on the next scan at once
+MARKER_PERIOD = 1.0          # seconds between marker updates in continuous mode
+DIAGNOSTICS_PERIOD = 1.0     # seconds between /diagnostics messages while active
+MAX_QUEUED_CALLS = 64        # service calls waiting for the next scan at once; more: refused
+# executor threads: one per waiting call, plus room for scans, maps, lifecycle and refusals
+EXECUTOR_THREADS = MAX_QUEUED_CALLS + 8
+ANSWER_SLACK = 120.0         # s beyond scan_timeout a call waits for the localization itself
 
 
-def format_result(loc) -> str:
+def format_result(loc: Any) -> str:
     """One line for the service answer / log: pose, node, status, score, latency."""
     x, y, yaw = loc.pose
     return (f'x={x:.3f} y={y:.3f} yaw={yaw:.4f} node={loc.node} status={loc.status} '
             f'score={float(loc.score):.3f} latency_ms={float(loc.latency_ms):.1f}')
 
 
-class GlobalLocalizerNode(Node):
+def check_configs(values: dict[str, Any]) -> str | None:
+    """Why the core refuses the index / localizer config of these values, or None."""
+    pose = laser_pose_of(values)
+    for cls, prefix in ((IndexConfig, 'index'), (LocalizerConfig, 'localizer')):
+        try:
+            build_config(cls, prefix, values, pose)
+        except (ValueError, TypeError) as exc:
+            return f'invalid {prefix}.* parameters: {exc}'
+    return None
+
+
+def with_laser_pose(localizer: GlobalLocalizer, pose: tuple[float, float, float]):
+    """
+    Return the same localizer (shared index, trees, wall model) for a laser at ``pose``.
+
+    The laser pose only enters the localizer's conversion of laser poses to base poses, read
+    from ``config`` at each call, so a shallow copy with another config is exact and cheap.
+    """
+    variant = copy.copy(localizer)
+    variant.config = dataclasses.replace(localizer.config, laser_pose=tuple(pose))
+    return variant
+
+
+class GlobalLocalizerNode(LifecycleNode):
     """Global localization of single laser scans against the topological index of a map."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('global_localizer', **kwargs)
-        values = declare_table(self, localizer_parameters(), dynamic=DYNAMIC)
+        answer_invalid_transitions(self)
+        self._guard = ParameterGuard(self, localizer_parameters(), DYNAMIC, {'mode': MODES},
+                                     self._configured_state, check_configs)
+        values = self._guard.declare()
+        self._group = ReentrantCallbackGroup()
+        self._mailbox = ScanMailbox()
+        self._active = False
+        self._stop = threading.Event()
+        self._localize_lock = threading.Lock()   # one localization at a time
+        self._state_lock = threading.Lock()      # guards the fields below
+        self._last: Any = None                   # the last Localization (diagnostics)
+        self._index_marks: list = []
+        self._marks_frame = ''
+        self._last_markers = 0.0
+        self._variants: dict[tuple, GlobalLocalizer] = {}
+        self._configured_parts = False
+        self._workers: list[threading.Thread] = []
+        self._diag_timer = None
+        self._destroying = False
+        # always there, so a call in any state gets an answer (not a silent wait for a service)
+        self.create_service(Trigger, 'relocalize', self._on_relocalize,
+                            qos_profile=SERVICE_QOS, callback_group=self._group)
+        self.create_service(Empty, 'global_localization', self._on_global_localization,
+                            qos_profile=SERVICE_QOS, callback_group=self._group)
+        if values['autostart']:
+            schedule_autostart(self)
+        else:
+            self.get_logger().info('autostart is false: waiting for configure / activate '
+                                   '(lifecycle manager or ros2 lifecycle set)')
+
+    # ------------------------------------------------------------------ lifecycle
+    def _configured_state(self) -> str | None:
+        """Return the state label while configure-time parameters are in use, else None."""
+        return None if state_id(self) == UNCONFIGURED else state_label(self)
+
+    @transition('configure')
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self._destroying:
+            return FAILURE
+        values = self._guard.values()
         self.mode = str(values['mode'])
-        if self.mode not in MODES:
-            raise ValueError(f'parameter mode must be one of {MODES}, got {self.mode!r}')
-        self.base_frame = str(values['base_frame'])
+        self.base_frame = str(values['base_frame']).lstrip('/')
         self.map_frame_param = str(values['map_frame'])
         self.laser_pose = laser_pose_of(values)
         self.index_config = build_config(IndexConfig, 'index', values, self.laser_pose)
         self.localizer_config = build_config(LocalizerConfig, 'localizer', values,
                                              self.laser_pose)
-        self.index_file = str(values['index_file'])
         self.rate = float(values['rate'])
         self.max_map_cells = int(values['max_map_cells'])
         self.max_gvd_points = int(values['max_gvd_points'])
+        index_file = str(values['index_file'])
+        index_path = Path(index_file).expanduser() if index_file else None
 
-        self._state_lock = threading.Lock()     # guards the fields below
-        self._localizer = None                  # GlobalLocalizer of the current, complete index
-        self._map_frame = self.map_frame_param or 'map'
-        self._index_markers: list = []
-        self._map_checksum: str | None = None    # of the last map submitted for indexing
-        self._index_checksum: str | None = None  # of the map the current localizer serves
-        self._localize_lock = threading.Lock()  # one localization at a time
-        self._scan_cv = threading.Condition()
-        self._scan: LaserScan | None = None
-        self._scan_seq = 0
-        self._stopping = threading.Event()
-        self._last_markers = 0.0
-        self._call_slots = threading.BoundedSemaphore(MAX_WAITING_CALLS)
-
-        group = ReentrantCallbackGroup()
-        self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, 'global_pose',
-                                              LATCHED_QOS)
-        self.initialpose_pub = self.create_publisher(
+        self._laser = LaserPoseSource.for_node(self, self.base_frame, self.laser_pose,
+                                               self.get_logger().info)
+        if not self._laser.uses_tf:
+            self.get_logger().info('tf2_ros is not installed: the laser pose comes from the '
+                                   'laser_x / laser_y / laser_yaw parameters')
+        self.pose_pub = self.create_lifecycle_publisher(PoseWithCovarianceStamped,
+                                                        'global_pose', LATCHED_QOS)
+        self.initialpose_pub = self.create_lifecycle_publisher(
             PoseWithCovarianceStamped, 'initialpose',
             QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
-        self.marker_pub = self.create_publisher(MarkerArray, 'topological_map', LATCHED_QOS)
-        self.create_subscription(LaserScan, 'scan', self._on_scan, qos_profile_sensor_data,
-                                 callback_group=group)
-        self.create_service(Trigger, 'relocalize', self._on_relocalize, callback_group=group)
-        self.builder = IndexBuilder(self.get_logger(), self._on_index, self._on_index_error)
+        self.candidates_pub = self.create_lifecycle_publisher(PoseArray, 'candidates',
+                                                              LATCHED_QOS)
+        self.marker_pub = self.create_lifecycle_publisher(MarkerArray, 'topological_map',
+                                                          LATCHED_QOS)
+        self.diagnostics_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics',
+                                                               10)
+        self.builder = IndexBuilder(self.get_logger(), self._on_index_done,
+                                    self._on_index_error)
+        self.source = IndexSource(
+            self.builder, self.get_logger(), index_path, self.resolve_topic_name('map'),
+            load_index, self._build, self._make_served, save_index, self._on_ready,
+            self._on_frame)
+        self.source.start()      # before the map subscription: a latched map may come at once
+        self._map_sub = self.create_subscription(OccupancyGrid, 'map', self._on_map,
+                                                 LATCHED_QOS, callback_group=self._group)
+        self._scan_sub = self.create_subscription(LaserScan, 'scan', self._on_scan,
+                                                  qos_profile_sensor_data,
+                                                  callback_group=self._group)
+        self._queue = RequestQueue(self._mailbox, MAX_QUEUED_CALLS, self._serve,
+                                   self._no_scan_text)
+        self._configured_parts = True
+        self.get_logger().info(f'configured: mode {self.mode}, base frame {self.base_frame}; '
+                               f'map: {self.source.map_state()[1]}')
+        return SUCCESS
 
-        index_path = Path(self.index_file).expanduser() if self.index_file else None
-        self._save_to = None
-        if index_path is not None and index_path.exists():
-            self._waiting_for = f'index file {index_path}'
-            self.builder.submit(f'index file {index_path}',
-                                lambda progress: self._load_job(index_path))
-        else:
-            if index_path is not None:
-                self.get_logger().warning(f'index file {index_path} not found: indexing the '
-                                          'map topic and saving the index there')
-                self._save_to = index_path
-            self.create_subscription(OccupancyGrid, 'map', self._on_map, LATCHED_QOS,
-                                     callback_group=group)
-            self._waiting_for = f'a map on {self.resolve_topic_name("map")}'
-        self._worker = None
+    @transition('activate')
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        result = super().on_activate(state)       # enables the lifecycle publishers
+        self._stop.clear()
+        self._active = True
+        with self._state_lock:
+            marks, frame = self._index_marks, self._marks_frame
+        if marks and self.get_parameter('publish_markers').value:
+            self.marker_pub.publish(markers.marker_array(marks, frame, self._now_ns()))
+        self._diag_timer = self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics,
+                                             callback_group=self._group)
         if self.mode == 'continuous':
-            self._worker = threading.Thread(target=self._continuous_loop, daemon=True,
-                                            name='continuous_localizer')
-            self._worker.start()
-        self.get_logger().info(f'mode {self.mode}; waiting for {self._waiting_for}')
+            if self.get_parameter('localize_on_start').value:
+                self.get_logger().info('localize_on_start: continuous mode localizes every scan '
+                                       'anyway')
+            self._start_worker(self._continuous_loop, 'continuous_localizer')
+        elif self.get_parameter('localize_on_start').value:
+            self._start_worker(self._startup_loop, 'localize_on_start')
+        self._publish_diagnostics()
+        return result
 
-    # ------------------------------------------------------------------ index
-    def _make_localizer(self, index):
-        localizer = GlobalLocalizer(index, self.localizer_config)
-        frame = getattr(index.map, 'frame_id', '') or 'map'
-        marks = markers.index_markers(index, self.map_frame_param or frame, 0,
-                                      self.max_gvd_points)
-        return localizer, marks
+    @transition('deactivate')
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._deactivate_parts('deactivated')
+        return super().on_deactivate(state)
 
-    def _load_job(self, path: Path):
-        index = load_index(path)
+    @transition('cleanup')
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._cleanup_parts('cleaned up')
+        return SUCCESS
+
+    @transition('shutdown')
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._deactivate_parts('shutting down')
+        self._cleanup_parts('shutting down')
+        return SUCCESS
+
+    @transition('error processing')
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._deactivate_parts('error')
+        self._cleanup_parts('error')
+        return SUCCESS
+
+    def _deactivate_parts(self, why: str) -> None:
+        self._active = False
+        self._stop.set()
+        self._mailbox.wake()
+        if self._configured_parts:
+            n = self._queue.cancel_all(f'not localized: global_localizer {why} while the call '
+                                       'waited for a scan')
+            if n:
+                self.get_logger().warning(f'{n} waiting calls answered: {why}')
+        for worker in self._workers:
+            worker.join(timeout=10.0)
+        self._workers = []
+        if self._diag_timer is not None:
+            self.destroy_timer(self._diag_timer)
+            self._diag_timer = None
+        self._mailbox.clear()
+
+    def _cleanup_parts(self, why: str) -> None:
+        if not self._configured_parts:
+            return
+        self._configured_parts = False
+        self._queue.stop(f'not localized: global_localizer {why}')
+        self.builder.stop()
+        self._laser.close()
+        self.destroy_subscription(self._map_sub)
+        self.destroy_subscription(self._scan_sub)
+        for pub in (self.pose_pub, self.initialpose_pub, self.candidates_pub, self.marker_pub,
+                    self.diagnostics_pub):
+            self.destroy_lifecycle_publisher(pub)
+        with self._state_lock:
+            self._last, self._index_marks, self._variants = None, [], {}
+
+    def _start_worker(self, target, name: str) -> None:
+        worker = threading.Thread(target=target, name=name, daemon=True)
+        self._workers.append(worker)
+        worker.start()
+
+    def destroy_node(self) -> None:
+        """Stop the worker threads, then destroy the node."""
+        self._destroying = True
+        self._deactivate_parts('shutting down')
+        self._cleanup_parts('shutting down')
+        super().destroy_node()
+
+    # ------------------------------------------------------------------ map and index
+    def _build(self, occ, progress):
+        return build_index(occ, self.index_config, progress=progress)
+
+    def _make_served(self, index, source: str) -> ServedIndex:
         sensor = tuple(getattr(index.config, 'sensor_pose', self.laser_pose))
-        if any(abs(a - b) > 1e-6 for a, b in zip(sensor, self.laser_pose)):
-            self.get_logger().warning(f'{path} was built with the laser at {sensor} on the base, '
-                                      f'the laser_* parameters say {self.laser_pose}')
-        self.get_logger().info(f'loaded {path}: its own index parameters apply (index.* ignored)')
-        return (index, *self._make_localizer(index))
+        if source != 'map topic' and any(abs(a - b) > 1e-6
+                                         for a, b in zip(sensor, self.laser_pose)):
+            self.get_logger().warning(f'{source} was built with the laser at {sensor} on the '
+                                      f'base, the laser_* parameters say {self.laser_pose}')
+        localizer = GlobalLocalizer(index, self.localizer_config)
+        return ServedIndex(index, localizer, index.map.checksum(), source,
+                           getattr(index.map, 'frame_id', '') or '')
 
-    def _build_job(self, occ, progress):
-        index = build_index(occ, self.index_config, progress=progress)
-        return (index, *self._make_localizer(index))
+    def _on_index_done(self, result, label: str) -> None:
+        self.source.on_done(result, label)
+
+    def _on_index_error(self, exc: BaseException, label: str) -> None:
+        self.source.on_error(exc, label)
+
+    def _frame(self, served: ServedIndex | None) -> str:
+        return self.map_frame_param or (served.frame if served else '') or 'map'
+
+    def _on_ready(self, served: ServedIndex) -> None:
+        frame = self._frame(served)
+        how = 'loaded' if served.source != 'map topic' else 'indexed'
+        self.get_logger().info(f'{served.source}: {how}, ready, {len(served.index.node_xy)} '
+                               f'nodes (frame {frame})')
+        self._refresh_index_markers(served, frame)
+
+    def _on_frame(self, frame: str) -> None:
+        served = self.source.served
+        if served is not None:
+            self._refresh_index_markers(served, self._frame(served))
+
+    def _refresh_index_markers(self, served: ServedIndex, frame: str) -> None:
+        stamp = self._now_ns()
+        marks = markers.index_markers(served.index, frame, stamp, self.max_gvd_points)
+        with self._state_lock:
+            self._index_marks, self._marks_frame, self._variants = marks, frame, {}
+        if self._active and self.get_parameter('publish_markers').value:
+            self.marker_pub.publish(markers.marker_array(marks, frame, stamp))
 
     def _on_map(self, msg: OccupancyGrid) -> None:
         occ = usable_map(msg, self.max_map_cells, self.get_logger())
-        if occ is None:
-            return
-        checksum = occ.checksum()
-        with self._state_lock:
-            if checksum == self._map_checksum:
-                self.get_logger().info('received the same map again: keeping its index')
-                return
-            self._map_checksum = checksum
-        label = f'map {occ.width}x{occ.height} @ {occ.resolution:g} m ({checksum[:8]})'
-        self.get_logger().info(f'{label}: indexing')
-        self.builder.submit(label, lambda progress: self._build_job(occ, progress))
+        if occ is not None:
+            self.source.on_map(occ)
 
-    def _on_index(self, result, label: str) -> None:
-        index, localizer, marks = result
-        frame = self.map_frame_param or getattr(index.map, 'frame_id', '') or 'map'
-        with self._state_lock:
-            self._localizer, self._map_frame, self._index_markers = localizer, frame, marks
-            self._index_checksum = index.map.checksum()
-        self.get_logger().info(f'{label}: ready, {len(index.node_xy)} nodes (frame {frame})')
-        if self.get_parameter('publish_markers').value:
-            self.marker_pub.publish(markers.marker_array(marks, frame,
-                                                         self.get_clock().now().nanoseconds))
-        if self._save_to is not None:
-            try:
-                self._save_to.parent.mkdir(parents=True, exist_ok=True)
-                save_index(index, self._save_to)
-                self.get_logger().info(f'index written to {self._save_to}')
-            except (OSError, ValueError) as exc:
-                self.get_logger().error(f'cannot write index file {self._save_to}: {exc}')
-
-    def _on_index_error(self, exc: BaseException, label: str) -> None:
-        with self._state_lock:
-            keeping = self._localizer is not None
-            self._map_checksum = self._index_checksum
-        self.get_logger().warning(f'{label}: indexing failed ({type(exc).__name__}: {exc}); '
-                                  + ('keeping the previous index' if keeping else
-                                     'still no index'))
+    def map_state(self) -> tuple[str, str]:
+        """``('no map' | 'indexing' | 'ready', detail)``; ``'no map'`` before configure."""
+        if not self._configured_parts:
+            return 'no map', 'not configured'
+        return self.source.map_state()
 
     # ------------------------------------------------------------------ scans
     def _on_scan(self, msg: LaserScan) -> None:
-        with self._scan_cv:
-            self._scan = msg
-            self._scan_seq += 1
-            self._scan_cv.notify_all()
+        if self._active:
+            self._mailbox.put(msg)
 
     def _not_ready(self) -> str | None:
         """Why nothing can be localized now, or None."""
-        if self.builder.busy:
-            return f'indexing in progress ({self.builder.status()}); try again shortly'
-        with self._state_lock:
-            if self._localizer is None:
-                return f'no map/index yet: waiting for {self._waiting_for}'
+        if not self._active:
+            label = state_label(self)
+            todo = {'unconfigured': 'configure and activate it', 'inactive': 'activate it',
+                    'finalized': 'it has shut down'}.get(label, 'try again once it is active')
+            return (f'global_localizer is {label}, not active: {todo} (ros2 lifecycle set '
+                    f'{self.get_fully_qualified_name()} configure|activate)')
+        state, detail = self.source.map_state()
+        if state == 'indexing':
+            return f'indexing in progress ({detail}); try again shortly'
+        if state == 'no map':
+            return f'no map/index yet: {detail}'
         return None
 
-    def localize_msg(self, msg: LaserScan, verbose: bool = True):
-        """Localize one scan and publish; return ``(Localization | None, reason | None)``."""
+    def _localizer_for(self, served: ServedIndex, mount: LaserMount) -> GlobalLocalizer:
+        pose = tuple(mount.pose)
+        if all(abs(a - b) < 1e-9 for a, b in zip(pose, served.localizer.config.laser_pose)):
+            return served.localizer
+        with self._state_lock:
+            variant = self._variants.get(pose)
+            if variant is None or variant.index is not served.index:
+                variant = self._variants[pose] = with_laser_pose(served.localizer, pose)
+        return variant
+
+    def localize_msg(self, msg: LaserScan, verbose: bool = True) -> tuple[Any, str | None]:
+        """Localize one scan and publish; ``(Localization | None, reason | None)``."""
         reason = self._not_ready()
         if reason:
             return None, reason
-        with self._state_lock:
-            localizer, frame, index_marks = self._localizer, self._map_frame, self._index_markers
+        served = self.source.served
         args = scan_args_from_msg(msg)
         problem = scan_problem(args)
         if problem:
             self.get_logger().warning(f'skipping scan: {problem}', throttle_duration_sec=2.0)
             return None, f'bad scan: {problem}'
-        if args.angle_increment < 0.0:
+        mount = self._laser.mount(msg.header.frame_id)
+        if mount.mirrored:
+            args = ScanArgs(args.ranges, -args.angle_min, -args.angle_increment,
+                            args.range_min, args.range_max)
+        elif args.angle_increment < 0.0:
             self.get_logger().warning('negative angle_increment: mirrored (upside-down) laser? '
                                       'localizing the scan as given', once=True)
+        localizer = self._localizer_for(served, mount)
         with self._localize_lock:
             try:
                 loc = localizer.localize_scan(*args.as_tuple())
             except Exception as exc:  # noqa: BLE001 - a bad scan must not kill the node
                 self.get_logger().warning(f'localization error: {type(exc).__name__}: {exc}')
                 return None, f'localization error: {exc}'
-        stamp = msg.header.stamp
-        now = time.monotonic()
-        if self.get_parameter('publish_markers').value and (
-                verbose or now - self._last_markers >= MARKER_PERIOD):
-            self._last_markers = now
-            marks = markers.localization_markers(
-                loc, frame, stamp, self.localizer_config.top_n, scan_points(args),
-                self.laser_pose, getattr(localizer.index, 'node_xy', None))
-            self.marker_pub.publish(markers.marker_array([*index_marks, *marks], frame, stamp))
+        self._publish_result(loc, msg, args, mount, served, verbose)
         pose = loc.pose
         if loc.status != 'ok' or pose is None or not all(math.isfinite(v) for v in pose):
             text = f'{loc.status}: {loc.message}'
             if verbose:
                 self.get_logger().warning(f'no pose published: {text}')
             return loc, text
-        out = pose_with_covariance(loc, 0, frame)
-        out.header.stamp = stamp
-        self.pose_pub.publish(out)
-        if self.get_parameter('publish_initialpose').value:
-            self.initialpose_pub.publish(out)
-        log = self.get_logger().info if verbose else self.get_logger().debug
-        log(f'{self.base_frame} in {frame}: {format_result(loc)}')
         return loc, None
 
-    def _on_relocalize(self, request: Trigger.Request, response: Trigger.Response):
+    def _publish_result(self, loc, msg: LaserScan, args: ScanArgs, mount: LaserMount,
+                        served: ServedIndex, verbose: bool) -> None:
+        frame = self._frame(served)
+        stamp = msg.header.stamp
+        with self._state_lock:
+            self._last = loc
+            index_marks = self._index_marks
+        top_n = self.localizer_config.top_n
+        self.candidates_pub.publish(pose_array(
+            [c.pose for c in list(loc.candidates or [])[:top_n]], stamp, frame))
+        now = time.monotonic()
+        if self.get_parameter('publish_markers').value and (
+                verbose or now - self._last_markers >= MARKER_PERIOD):
+            self._last_markers = now
+            marks = markers.localization_markers(loc, frame, stamp, top_n, scan_points(args),
+                                                 mount.pose, served.index.node_xy)
+            self.marker_pub.publish(markers.marker_array([*index_marks, *marks], frame, stamp))
+        pose = loc.pose
+        if loc.status == 'ok' and pose is not None and all(math.isfinite(v) for v in pose):
+            out = pose_with_covariance(loc, 0, frame)
+            out.header.stamp = stamp
+            self.pose_pub.publish(out)
+            if self.get_parameter('publish_initialpose').value:
+                self.initialpose_pub.publish(out)
+            log = self.get_logger().info if verbose else self.get_logger().debug
+            log(f'{self.base_frame} in {frame}: {format_result(loc)}')
+        if verbose:
+            self._publish_diagnostics()
+
+    # ------------------------------------------------------------------ services
+    def _serve(self, msg: LaserScan) -> Answer:
+        loc, reason = self.localize_msg(msg, verbose=True)
+        return Answer(reason is None, format_result(loc) if reason is None else reason, loc)
+
+    def _no_scan_text(self, timeout: float) -> str:
+        return f'no scan received on {self.resolve_topic_name("scan")} within {timeout:g} s'
+
+    def _localize_next_scan(self, service: str) -> Answer:
+        """Wait (in this executor thread) for the answer of the next scan, or refuse."""
         reason = self._not_ready()
-        timeout = float(self.get_parameter('scan_timeout').value)
-        if reason is None and not self._call_slots.acquire(blocking=False):
-            reason = f'busy: {MAX_WAITING_CALLS} relocalize calls are already waiting for a scan'
-        elif reason is None:
-            try:    # blocks this executor thread only; scans arrive on the others
-                with self._scan_cv:
-                    seq0 = self._scan_seq
-                    got = self._scan_cv.wait_for(
-                        lambda: self._scan_seq > seq0 or self._stopping.is_set(), timeout)
-                    msg = self._scan
-            finally:
-                self._call_slots.release()
-            if not got or msg is None or self._stopping.is_set():
-                reason = (f'no scan received on {self.resolve_topic_name("scan")} within '
-                          f'{timeout:g} s')
         if reason is None:
-            loc, reason = self.localize_msg(msg, verbose=True)
-        response.success = reason is None
-        response.message = format_result(loc) if reason is None else reason
-        if reason is not None:
-            self.get_logger().warning(f'relocalize failed: {reason}')
+            timeout = float(self.get_parameter('scan_timeout').value)
+            queued = self._queue.submit(timeout)
+            if isinstance(queued, str):
+                answer = Answer(False, queued)
+            else:
+                try:
+                    answer = queued.result(timeout=timeout + ANSWER_SLACK)
+                except FutureTimeout:
+                    answer = Answer(False, f'no answer within {timeout + ANSWER_SLACK:g} s')
+        else:
+            answer = Answer(False, reason)
+        if not answer.ok:
+            self.get_logger().warning(f'{service} failed: {answer.message}')
+        return answer
+
+    def _on_relocalize(self, request: Trigger.Request, response: Trigger.Response):
+        answer = self._localize_next_scan('relocalize')
+        response.success, response.message = answer.ok, answer.message
         return response
 
+    def _on_global_localization(self, request: Empty.Request, response: Empty.Response):
+        self._localize_next_scan('global_localization')
+        return response
+
+    # ------------------------------------------------------------------ loops
     def _continuous_loop(self) -> None:
-        done = 0
+        done = self._mailbox.seq
         period = 1.0 / self.rate if self.rate > 0 else 0.0
         next_t = 0.0
-        while not self._stopping.is_set():
-            if period and self._stopping.wait(max(0.0, next_t - time.monotonic())):
+        while not self._stop.is_set():
+            if period and self._stop.wait(max(0.0, next_t - time.monotonic())):
                 return
-            with self._scan_cv:
-                self._scan_cv.wait_for(lambda: self._scan_seq > done or self._stopping.is_set())
-                if self._stopping.is_set():
-                    return
-                msg, done = self._scan, self._scan_seq
+            got = self._mailbox.wait_newer(done, None, self._stop)
+            if got is None:
+                continue
+            msg, done = got
             next_t = time.monotonic() + period
             reason = self._not_ready()
             if reason:
                 self.get_logger().info(f'not localizing: {reason}', throttle_duration_sec=5.0)
                 continue
-            try:
-                loc, reason = self.localize_msg(msg, verbose=False)
-            except Exception:   # publishing fails once Ctrl-C has shut the context down
-                if not self.context.ok():
-                    return
-                raise
+            loc, reason = self.localize_msg(msg, verbose=False)
             if reason and loc is not None:
                 self.get_logger().info(f'no pose: {reason}', throttle_duration_sec=2.0)
 
-    def destroy_node(self) -> None:
-        self._stopping.set()
-        with self._scan_cv:
-            self._scan_cv.notify_all()
-        self.builder.stop()
-        if self._worker is not None:
-            self._worker.join(timeout=5.0)
-        super().destroy_node()
+    def _startup_loop(self) -> None:
+        """``localize_on_start``: localize incoming scans until the first ``ok`` pose."""
+        self.get_logger().info('localize_on_start: localizing incoming scans until the first '
+                               'ok pose')
+        done = self._mailbox.seq
+        while not self._stop.is_set():
+            got = self._mailbox.wait_newer(done, None, self._stop)
+            if got is None:
+                continue
+            msg, done = got
+            reason = self._not_ready()
+            if reason:
+                self.get_logger().info(f'localize_on_start: waiting ({reason})',
+                                       throttle_duration_sec=5.0)
+                continue
+            loc, reason = self.localize_msg(msg, verbose=False)
+            if reason is None:
+                self.get_logger().info(f'localize_on_start: localized, {format_result(loc)}; '
+                                       'on demand from now on')
+                self._publish_diagnostics()
+                return
+            self.get_logger().info(f'localize_on_start: {reason}; trying the next scan',
+                                   throttle_duration_sec=2.0)
+
+    # ------------------------------------------------------------------ diagnostics
+    def _publish_diagnostics(self) -> None:
+        if not self._configured_parts:
+            return
+        state, detail = self.source.map_state()
+        with self._state_lock:
+            last = self._last
+        served = self.source.served
+        status = localization_status(self.get_name(), self.get_fully_qualified_name(), state,
+                                     last, detail, self._frame(served), state_label(self),
+                                     self.mode)
+        try:
+            self.diagnostics_pub.publish(diagnostic_array([status], self._now_ns()))
+        except Exception:  # noqa: BLE001 - a tick racing with cleanup: the publisher is gone
+            if self._configured_parts:
+                raise
+
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
 
 
 def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run ssm_localization global_localizer``."""
     return spin(GlobalLocalizerNode, args, num_threads=EXECUTOR_THREADS)
 
 

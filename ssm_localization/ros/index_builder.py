@@ -11,7 +11,8 @@ class Superseded(Exception):
 
 
 class IndexBuilder:
-    """Runs index jobs in one worker thread; the newest submitted job wins.
+    """
+    Runs index jobs in one worker thread; the newest submitted job wins.
 
     ``submit(label, job)`` queues ``job(progress) -> MapIndex``, replacing a queued job that has
     not started; a running job is aborted at its next progress report (``Superseded``) or its

@@ -1,67 +1,151 @@
-"""``map_indexer`` node: builds the topological index of every map it receives.
+"""
+``map_indexer`` lifecycle node: builds the topological index of every map it receives.
 
-Subscribes ``map`` (nav_msgs/OccupancyGrid, reliable + transient-local), builds the index
-(GVD nodes + virtual scans) in a worker thread, publishes ``topological_map``
-(visualization_msgs/MarkerArray, transient-local) and writes ``index_file`` when it is set.
-A newer map supersedes the one being indexed; a half-built index is never published.
+Lifecycle: configure reads the parameters and creates the publisher; activate subscribes
+``map`` (nav_msgs/OccupancyGrid, reliable + transient-local) and indexes each map in a worker
+thread (the newest map wins; a half-built index is never published), publishing
+``topological_map`` (visualization_msgs/MarkerArray, transient-local) and writing ``index_file``
+when it is set; deactivate unsubscribes; cleanup drops the index. With ``autostart`` (default)
+the node configures and activates itself.
 """
 from __future__ import annotations
 
 from pathlib import Path
+import threading
 from typing import Any
 
 from nav_msgs.msg import OccupancyGrid
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.node import Node
-from visualization_msgs.msg import MarkerArray
-
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from ssm_localization.config import IndexConfig
 from ssm_localization.mapping.index import build_index, save_index
 from ssm_localization.ros import markers
 from ssm_localization.ros.executor import spin
 from ssm_localization.ros.index_builder import IndexBuilder
+from ssm_localization.ros.lifecycle import (answer_invalid_transitions, FAILURE,
+                                            schedule_autostart, state_id, state_label, SUCCESS,
+                                            transition, UNCONFIGURED)
 from ssm_localization.ros.maps import usable_map
-from ssm_localization.ros.parameters import (build_config, declare_table, indexer_parameters,
-                                             laser_pose_of)
+from ssm_localization.ros.parameter_guard import ParameterGuard
+from ssm_localization.ros.parameters import build_config, indexer_parameters, laser_pose_of
 from ssm_localization.ros.qos import LATCHED_QOS
+from visualization_msgs.msg import MarkerArray
 
 
-class MapIndexerNode(Node):
-    """Indexes each map received on ``map``; publishes ``topological_map``."""
+def check_index_config(values: dict[str, Any]) -> str | None:
+    """Why the core refuses the index config of these values, or None."""
+    try:
+        build_config(IndexConfig, 'index', values, laser_pose_of(values))
+    except (ValueError, TypeError) as exc:
+        return f'invalid index.* parameters: {exc}'
+    return None
+
+
+class MapIndexerNode(LifecycleNode):
+    """Indexes each map received on ``map`` while active; publishes ``topological_map``."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('map_indexer', **kwargs)
-        values = declare_table(self, indexer_parameters())
+        answer_invalid_transitions(self)
+        self._guard = ParameterGuard(self, indexer_parameters(), (), {}, self._configured_state,
+                                     check_index_config)
+        values = self._guard.declare()
+        self._group = ReentrantCallbackGroup()
+        self._lock = threading.Lock()
+        self.index = None
+        self.builder = None
+        self._map_sub = None
+        self._checksum: str | None = None
+        self._destroying = False
+        if values['autostart']:
+            schedule_autostart(self)
+        else:
+            self.get_logger().info('autostart is false: waiting for configure / activate')
+
+    def _configured_state(self) -> str | None:
+        return None if state_id(self) == UNCONFIGURED else state_label(self)
+
+    @transition('configure')
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self._destroying:
+            return FAILURE
+        values = self._guard.values()
         self.laser_pose = laser_pose_of(values)
         self.index_config = build_config(IndexConfig, 'index', values, self.laser_pose)
         self.index_file = str(values['index_file'])
         self.max_map_cells = int(values['max_map_cells'])
         self.max_gvd_points = int(values['max_gvd_points'])
-        self.index = None
-        self._group = ReentrantCallbackGroup()
-        self.marker_pub = self.create_publisher(MarkerArray, 'topological_map', LATCHED_QOS)
-        self.create_subscription(OccupancyGrid, 'map', self._on_map, LATCHED_QOS,
-                                 callback_group=self._group)
+        self.marker_pub = self.create_lifecycle_publisher(MarkerArray, 'topological_map',
+                                                          LATCHED_QOS)
         self.builder = IndexBuilder(self.get_logger(), self._on_index, self._on_error)
+        return SUCCESS
+
+    @transition('activate')
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        result = super().on_activate(state)
+        self._map_sub = self.create_subscription(OccupancyGrid, 'map', self._on_map,
+                                                 LATCHED_QOS, callback_group=self._group)
+        if self.index is not None:
+            self._publish(self.index)
         self.get_logger().info(f'waiting for a map on {self.resolve_topic_name("map")}')
+        return result
+
+    @transition('deactivate')
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._unsubscribe()
+        return super().on_deactivate(state)
+
+    @transition('cleanup')
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return SUCCESS
+
+    @transition('shutdown')
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._unsubscribe()
+        self._release()
+        return SUCCESS
+
+    def _unsubscribe(self) -> None:
+        if self._map_sub is not None:
+            self.destroy_subscription(self._map_sub)
+            self._map_sub = None
+
+    def _release(self) -> None:
+        if self.builder is not None:
+            self.builder.stop()
+            self.builder = None
+            self.destroy_lifecycle_publisher(self.marker_pub)
+        with self._lock:
+            self.index, self._checksum = None, None
 
     def _on_map(self, msg: OccupancyGrid) -> None:
         occ = usable_map(msg, self.max_map_cells, self.get_logger())
-        if occ is None:
+        if occ is None or self.builder is None:
             return
-        label = f'map {occ.width}x{occ.height} @ {occ.resolution:g} m ({occ.checksum()[:8]})'
+        checksum = occ.checksum()
+        with self._lock:
+            same = checksum == self._checksum and self.index is not None and \
+                self.index.map.frame_id == occ.frame_id
+        if same:
+            self.get_logger().info('received the same map again: keeping its index')
+            return
+        label = f'map {occ.width}x{occ.height} @ {occ.resolution:g} m ({checksum[:8]})'
         self.get_logger().info(f'{label}: indexing')
         cfg = self.index_config
         self.builder.submit(label, lambda progress: build_index(occ, cfg, progress=progress))
 
-    def _on_index(self, index, label: str) -> None:
-        self.index = index
-        n = len(index.node_xy)
-        self.get_logger().info(f'{label}: index ready, {n} nodes')
+    def _publish(self, index) -> None:
         frame = getattr(index.map, 'frame_id', 'map') or 'map'
         stamp = self.get_clock().now().nanoseconds
         self.marker_pub.publish(markers.marker_array(
             markers.index_markers(index, frame, stamp, self.max_gvd_points), frame, stamp))
+
+    def _on_index(self, index, label: str) -> None:
+        with self._lock:
+            self.index, self._checksum = index, index.map.checksum()
+        self.get_logger().info(f'{label}: index ready, {len(index.node_xy)} nodes')
+        self._publish(index)
         if self.index_file:
             path = Path(self.index_file).expanduser()
             try:
@@ -76,11 +160,15 @@ class MapIndexerNode(Node):
                                   'keeping the previous index')
 
     def destroy_node(self) -> None:
-        self.builder.stop()
+        """Stop the index worker, then destroy the node."""
+        self._destroying = True
+        self._unsubscribe()
+        self._release()
         super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run ssm_localization map_indexer``."""
     return spin(MapIndexerNode, args)
 
 

@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 from nav_msgs.msg import OccupancyGrid
-
-from ssm_localization.mapping.map_io import OccupancyMap, occupancy_map_from_msg
+from ssm_localization.mapping.map_io import occupancy_map_from_msg, OccupancyMap
 
 
 def map_from_msg(msg: OccupancyGrid, max_cells: int) -> OccupancyMap:
-    """OccupancyGrid -> OccupancyMap with a size guard; raises ValueError with the reason."""
+    """
+    Convert OccupancyGrid -> OccupancyMap with a size guard.
+
+    Raises ValueError with the reason.
+    """
     cells = int(msg.info.width) * int(msg.info.height)
     if max_cells > 0 and cells > max_cells:
         raise ValueError(f'map of {msg.info.width} x {msg.info.height} cells exceeds '

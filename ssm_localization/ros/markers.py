@@ -1,4 +1,5 @@
-"""visualization_msgs/MarkerArray views of a MapIndex and of the last localization.
+"""
+visualization_msgs/MarkerArray views of a MapIndex and of the last localization.
 
 The array always starts with a DELETEALL marker, so re-publishing replaces what RViz shows.
 Namespaces: ``nodes`` (spheres colored by node kind), ``node_ids`` (text), ``gvd`` (points),
@@ -8,14 +9,13 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
-import numpy as np
 from geometry_msgs.msg import Point
-from std_msgs.msg import ColorRGBA
-from visualization_msgs.msg import Marker, MarkerArray
-
+import numpy as np
 from ssm_localization.mapping.topology import NODE_KIND_NAMES
 from ssm_localization.ros.conversions import pose_msg, time_msg
 from ssm_localization.transforms import apply, compose
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
 
 # Node kind -> RGB; kinds the topology module uses are matched by name (case-insensitive
 # substring), anything else gets a palette color by its rank among the kinds present.
@@ -41,7 +41,7 @@ def _point(x: float, y: float, z: float = 0.0) -> Point:
 
 
 def kind_name(kind: Any) -> str:
-    """A node kind as a name (``mapping.topology.NODE_KIND_NAMES`` for integer codes)."""
+    """Return a node kind as a name (``mapping.topology.NODE_KIND_NAMES`` for integer codes)."""
     if isinstance(kind, (int, np.integer)) and not isinstance(kind, bool):
         if 0 <= int(kind) < len(NODE_KIND_NAMES):
             return NODE_KIND_NAMES[int(kind)]

@@ -1,4 +1,5 @@
-"""Publish a bag's topics on live ROS topics (a small ``ros2 bag play`` for our bags).
+"""
+Publish a bag's topics on live ROS topics (a small ``ros2 bag play`` for our bags).
 
 The bag is read with :mod:`ssm_localization.io.bag_reader`; ``/map`` is published once, first,
 reliable + transient-local (latched); ``/scan`` (reliable, so sensor-data and reliable subscribers
@@ -8,21 +9,20 @@ both match), ``/ground_truth`` and ``/odom`` follow in timestamp order at ``rate
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
+import time
 from typing import Any, Callable, Iterable
 
-import numpy as np
-import rclpy
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
+import numpy as np
+import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
-
 from ssm_localization.io.bag_reader import read_bag
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_msg, pose_stamped, time_msg)
@@ -45,7 +45,8 @@ def _norm(topic: str) -> str:
 def timeline(data, scan_topic: str = '/scan', topics: Iterable[str] | None = None,
              start_offset: float = 0.0, duration: float = 0.0,
              odom_frame: str = 'odom', base_frame: str = 'base_link') -> tuple[Any, list[Item]]:
-    """``(map OccupancyGrid or None, [Item] in stamp order)`` of a BagData, for selected topics.
+    """
+    ``(map OccupancyGrid or None, [Item] in stamp order)`` of a BagData, for selected topics.
 
     ``start_offset`` / ``duration`` (seconds, relative to the first scan) select a window of
     the timed topics; the map is always included when selected.

@@ -1,5 +1,8 @@
-"""``bench soak``: a ``global_localizer`` process in continuous mode, fed a looping bag for
-minutes, its resident memory and pose rate sampled.
+"""
+``bench soak``.
+
+A ``global_localizer`` process in continuous mode, fed a looping bag for minutes, its resident
+memory and pose rate sampled.
 
 The node runs as its own process (the installed console script, or ``python -m`` of its module),
 so its RSS is honest; this driver publishes the bag's map once (latched) and its scans in a loop
@@ -9,24 +12,23 @@ at a fixed rate, counts the poses the node publishes on ``global_pose``, and rea
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import os
+from pathlib import Path
 import random
 import signal
 import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
-from pathlib import Path
 
-import rclpy
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
-
 from ssm_localization.evaluation.plotting import plot_soak
 from ssm_localization.io.bag_reader import read_bag
 from ssm_localization.ros.conversions import laser_scan_from_record, occupancy_grid_from_map
@@ -87,7 +89,7 @@ def rss_mb(pid: int) -> float:
 
 
 def node_command(params: list[str]) -> list[str]:
-    """The installed ``global_localizer`` beside this interpreter, else its module."""
+    """Return the installed ``global_localizer`` beside this interpreter, else its module."""
     script = Path(sys.executable).parent / 'global_localizer'
     base = [str(script)] if script.exists() else [sys.executable, '-m',
                                                   'ssm_localization.ros.global_localizer']

@@ -1,0 +1,223 @@
+"""
+IndexSource: index_file vs the map topic.
+
+(issue 13 item 4), with the real IndexBuilder thread and small stand-in maps (the node tests run
+the same rules over DDS with real indexes).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+import threading
+import time
+
+import pytest
+from ssm_localization.ros.index_builder import IndexBuilder
+from ssm_localization.ros.index_source import FILE, IndexSource, ServedIndex
+
+
+@dataclass
+class FakeMap:
+    cells: str
+    frame_id: str = 'map'
+    width: int = 10
+    height: int = 10
+    resolution: float = 0.05
+
+    def checksum(self) -> str:
+        return f'{self.cells:0<16}'
+
+
+class Log:
+    def __init__(self):
+        self.lines: list[tuple[str, str]] = []
+
+    def info(self, text):
+        self.lines.append(('info', text))
+
+    def warning(self, text):
+        self.lines.append(('warning', text))
+
+    def error(self, text):
+        self.lines.append(('error', text))
+
+    def warnings(self):
+        return [t for level, t in self.lines if level == 'warning']
+
+
+class Harness:
+    """An IndexSource whose 'index' is the FakeMap it was built from; files hold a map name."""
+
+    def __init__(self, tmp_path: Path, file_content: str | None = None, block_load=False):
+        self.path = tmp_path / 'index.npz'
+        if file_content is not None:
+            self.path.write_text(file_content)
+        self.log = Log()
+        self.ready: list[ServedIndex] = []
+        self.frames: list[str] = []
+        self.saved: list[str] = []
+        self.built: list[str] = []
+        self.release = threading.Event()
+        if not block_load:
+            self.release.set()
+        self.done = threading.Condition()
+        self.builder = IndexBuilder(self.log, self._on_done, self._on_error)
+        self.source = IndexSource(self.builder, self.log, self.path, '/map', self._load,
+                                  self._build, self._make, self._save, self._ready,
+                                  self.frames.append)
+
+    def _on_done(self, result, label):
+        self.source.on_done(result, label)
+
+    def _on_error(self, exc, label):
+        self.source.on_error(exc, label)
+
+    def _load(self, path):
+        self.release.wait(5)
+        text = path.read_text()
+        if text == 'corrupt':
+            raise ValueError(f'{path}: not a readable index file (bad zip)')
+        return FakeMap(text, 'file_frame')
+
+    def _build(self, occ, progress):
+        self.built.append(occ.cells)
+        return occ
+
+    def _make(self, index, source):
+        return ServedIndex(index, f'localizer({index.cells})', index.checksum(), source,
+                           index.frame_id)
+
+    def _save(self, index, path):
+        path.write_text(index.cells)
+        self.saved.append(index.cells)
+
+    def _ready(self, served):
+        self.ready.append(served)
+
+    def settle(self):
+        assert self.builder.wait_idle(5.0)
+
+    def close(self):
+        self.builder.stop()
+
+
+@pytest.fixture
+def harness_factory(tmp_path):
+    made = []
+
+    def make(*args, **kw):
+        h = Harness(tmp_path, *args, **kw)
+        made.append(h)
+        return h
+    yield make
+    for h in made:
+        h.close()
+
+
+def test_good_file_then_matching_map_keeps_the_file_and_takes_the_topic_frame(harness_factory):
+    h = harness_factory('A', block_load=True)
+    h.source.start()
+    assert h.source.map_state()[0] == 'indexing'
+    h.source.on_map(FakeMap('A', 'world'))           # arrives while the file loads
+    h.release.set()
+    h.settle()
+    assert [s.checksum[:1] for s in h.ready] == ['A'] and h.built == []
+    assert h.ready[0].source.startswith(FILE) and h.ready[0].frame == 'world'
+    assert h.source.map_state() == ('ready', h.ready[0].source)
+    assert not h.log.warnings() and h.saved == []
+
+
+def test_file_built_for_another_map_is_not_used(harness_factory):
+    h = harness_factory('A', block_load=True)
+    h.source.start()
+    h.source.on_map(FakeMap('B'))
+    h.release.set()
+    h.settle()
+    assert [s.checksum[:1] for s in h.ready] == ['B'] and h.built == ['B']
+    warning, = h.log.warnings()
+    assert 'was built for another map' in warning and 'not using it' in warning
+    assert h.saved == ['B'] and h.path.read_text() == 'B'     # the stale file is rewritten
+
+
+def test_map_differing_from_a_served_file_index_replaces_it_with_a_warning(harness_factory):
+    h = harness_factory('A')
+    h.source.start()
+    h.settle()
+    assert h.ready[-1].checksum[:1] == 'A' and h.ready[-1].frame == 'file_frame'
+    h.source.on_map(FakeMap('C'))
+    h.settle()
+    assert h.ready[-1].checksum[:1] == 'C' and h.ready[-1].source == 'map topic'
+    assert any('is not the map' in w for w in h.log.warnings())
+    assert h.saved == ['C']
+
+
+def test_corrupt_file_falls_back_to_the_map_topic(harness_factory):
+    h = harness_factory('corrupt')
+    h.source.start()
+    h.settle()
+    assert h.ready == [] and h.source.map_state()[0] == 'no map'
+    warning, = h.log.warnings()
+    assert 'cannot use index file' in warning and 'bad zip' in warning
+    assert 'falling back to the map on /map' in warning
+    h.source.on_map(FakeMap('D'))
+    h.settle()
+    assert h.ready[-1].checksum[:1] == 'D' and h.saved == ['D']
+
+
+def test_corrupt_file_with_a_map_already_received(harness_factory):
+    h = harness_factory('corrupt', block_load=True)
+    h.source.start()
+    h.source.on_map(FakeMap('E'))
+    h.release.set()
+    h.settle()
+    assert h.ready[-1].checksum[:1] == 'E' and h.saved == ['E']
+
+
+def test_missing_file_is_written_after_indexing_the_topic(harness_factory):
+    h = harness_factory(None)
+    h.source.start()
+    assert 'not found' in h.log.warnings()[0]
+    h.source.on_map(FakeMap('F'))
+    h.settle()
+    assert h.saved == ['F'] and h.path.read_text() == 'F'
+
+
+def test_same_map_again_and_frame_change(harness_factory):
+    h = harness_factory(None)
+    h.source.on_map(FakeMap('G', 'map'))
+    h.settle()
+    h.source.on_map(FakeMap('G', 'map'))
+    h.settle()
+    assert h.built == ['G'] and h.frames == []
+    h.source.on_map(FakeMap('G', 'map2'))
+    h.settle()
+    assert h.built == ['G'] and h.frames == ['map2']
+    assert h.source.served.frame == 'map2'
+    assert any("moved from frame 'map' to 'map2'" in w for w in h.log.warnings())
+
+
+def test_no_index_file_no_map(harness_factory, tmp_path):
+    h = harness_factory(None)
+    h.source._path = None
+    h.source.start()
+    assert h.log.lines == []
+    assert h.source.map_state() == ('no map', 'waiting for a map on /map')
+
+
+def test_a_map_job_dropped_by_the_builder_is_not_taken_for_pending(harness_factory):
+    """
+    A queued map job replaced by a newer job must not block the same map later.
+
+    IndexBuilder: the newest job wins; 'being indexed' would be a lie then.
+    """
+    h = harness_factory('corrupt', block_load=True)
+    h.builder.submit('slow', lambda progress: (h.release.wait(5), ('map', FakeMap('Z')))[1])
+    end = time.monotonic() + 5
+    while h.builder.status() != 'slow' and time.monotonic() < end:
+        time.sleep(0.01)
+    assert h.builder.status() == 'slow'
+    h.source.on_map(FakeMap('H'))            # queued behind 'slow', then replaced below
+    h.source.start()                         # the file job replaces the queued map job
+    h.release.set()
+    h.settle()
+    assert h.ready and h.ready[-1].checksum[:1] == 'H', [s.checksum for s in h.ready]
