@@ -232,6 +232,17 @@ def test_laser_pose_offset_gives_base_pose(depot, offset_sim, index_offset):
         assert _err(best.laser_pose, laser)[0] < 0.01       # the hypothesis keeps the laser pose
 
 
+def test_with_laser_pose_shares_the_map_and_moves_the_base(depot, offset_sim, localizer):
+    """A laser pose learnt later (TF) is applied to an existing localizer without rebuilding."""
+    moved = localizer.with_laser_pose(OFFSET)
+    assert moved.grid is localizer.grid and moved.voting is localizer.voting
+    assert localizer.config.laser_pose == (0.0, 0.0, 0.0)          # the original is untouched
+    scan, base = offset_sim.scans[0], offset_sim.poses[0]
+    out = moved.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                              scan.range_min, scan.range_max)
+    _assert_close(out, base, xy=0.01, yaw_deg=0.2)
+
+
 def test_without_laser_pose_the_answer_is_the_laser_frame(depot, offset_sim, localizer):
     scan, laser = offset_sim.scans[0], offset_sim.sensor_poses[0]
     out = localizer.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,

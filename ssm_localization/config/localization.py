@@ -37,13 +37,13 @@ class LocalizerConfig:
     search_step: float = param(math.radians(1.0), 'yaw step of the correlative search, rad')
     search_min_score: float = param(0.5, 'correlative score (mean point likelihood) below which '
                                          'no pose is kept')
-    search_ratio: float = param(0.9, 'keep search leaves within this ratio of the best one')
+    search_ratio: float = param(0.95, 'keep search leaves within this ratio of the best one')
     search_keep: int = param(4, 'distinct search leaves added as hypotheses')
     search_depth: int = param(5, 'levels of the branch and bound (top windows 2^depth cells)')
     search_sigma: float = param(0.1, 'width of the correlative likelihood, metres')
     search_cell: float = param(0.05, 'cell size of the search, metres (rounded to a whole number '
                                      'of map cells, at least one)')
-    search_points: int = param(60, 'scan points (of the spatially even set) the search scores')
+    search_points: int = param(40, 'scan points (of the spatially even set) the search scores')
     search_alignments: int = param(2, "further seed yaws from aligning the scan's wall "
                                       "directions with the map's")
     search_budget: float = param(0.2, 'seconds after which the search stops with what it has')

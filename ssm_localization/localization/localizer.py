@@ -28,6 +28,7 @@ vicinity score (eq. 10) wins, always ``ok``.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 from dataclasses import dataclass, field
 import math
@@ -212,6 +213,18 @@ class GlobalLocalizer:
     def base_pose(self, laser_pose: Pose2) -> Pose2:
         """Return the base pose in the map frame given the laser's."""
         return compose(laser_pose, self._base_from_laser)
+
+    def with_laser_pose(self, laser_pose: Pose2) -> GlobalLocalizer:
+        """
+        Return this localizer for a laser mounted at ``laser_pose`` on the base.
+
+        The map-only structures (features, grids, wall model) are shared; only the base <-> laser
+        conversions change, so a laser pose from TF costs nothing to apply.
+        """
+        variant = copy.copy(self)
+        variant.config = dataclasses.replace(self.config, laser_pose=tuple(laser_pose))
+        variant._base_from_laser = inverse(variant.config.laser_pose)
+        return variant
 
     def laser_pose(self, base_pose: Pose2) -> Pose2:
         """Return the laser pose in the map frame given the base's."""

@@ -21,8 +21,6 @@ serves ``relocalize`` (std_srvs/Trigger) and ``global_localization`` (std_srvs/E
 from __future__ import annotations
 
 from concurrent.futures import TimeoutError as FutureTimeout
-import copy
-import dataclasses
 import math
 from pathlib import Path
 import threading
@@ -84,18 +82,6 @@ def check_configs(values: dict[str, Any]) -> str | None:
         except (ValueError, TypeError) as exc:
             return f'invalid {prefix}.* parameters: {exc}'
     return None
-
-
-def with_laser_pose(localizer: GlobalLocalizer, pose: tuple[float, float, float]):
-    """
-    Return the same localizer (shared index, trees, wall model) for a laser at ``pose``.
-
-    The laser pose only enters the localizer's conversion of laser poses to base poses, read
-    from ``config`` at each call, so a shallow copy with another config is exact and cheap.
-    """
-    variant = copy.copy(localizer)
-    variant.config = dataclasses.replace(localizer.config, laser_pose=tuple(pose))
-    return variant
 
 
 class GlobalLocalizerNode(LifecycleNode):
@@ -359,7 +345,7 @@ class GlobalLocalizerNode(LifecycleNode):
         with self._state_lock:
             variant = self._variants.get(pose)
             if variant is None or variant.index is not served.index:
-                variant = self._variants[pose] = with_laser_pose(served.localizer, pose)
+                variant = self._variants[pose] = served.localizer.with_laser_pose(pose)
         return variant
 
     def localize_msg(self, msg: LaserScan, verbose: bool = True) -> tuple[Any, str | None]:
