@@ -87,7 +87,7 @@ class LocalizerConfig:
                                           'success tolerance: a corridor too bare to tell), m')
     covariance_scale: float = param(100.0, 'Gauss-Newton covariance multiplier (neighbouring '
                                            'residuals are correlated)')
-    min_position_std: float = param(0.035, 'floor of the reported position std, metres')
+    min_position_std: float = param(0.04, 'floor of the reported position std, metres')
     min_yaw_std: float = param(math.radians(0.5), 'floor of the reported yaw std, rad')
     min_points: int = param(10, 'fewer valid beams than this: failed')
     laser_pose: tuple[float, float, float] = param(
