@@ -181,8 +181,26 @@ def ros_domain() -> int:
     return domain
 
 
+def fresh_domain() -> int:
+    """
+    Move this process (and the processes it starts from now on) to a ROS domain of its own.
+
+    Each ROS test gets one, so a node of an earlier test that is still shutting down (a process
+    of the end-to-end tests, a node with the same name) cannot answer for the node under test.
+    """
+    if 'SSM_TEST_ROS_DOMAIN_ID' in os.environ:
+        return int(os.environ['SSM_TEST_ROS_DOMAIN_ID'])
+    current = int(os.environ.get('ROS_DOMAIN_ID', '0'))
+    domain = current
+    while domain == current:
+        domain = _RNG.randint(1, 101)
+    os.environ['ROS_DOMAIN_ID'] = str(domain)
+    return domain
+
+
 @pytest.fixture
 def ros(ros_domain):
+    fresh_domain()
     harness = RosHarness()
     try:
         yield harness

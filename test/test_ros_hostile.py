@@ -11,7 +11,7 @@ import math
 import subprocess
 import time
 
-from conftest import RosHarness, synthetic_map, venv_bin
+from conftest import fresh_domain, RosHarness, synthetic_map, venv_bin
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
 import pytest
@@ -38,6 +38,7 @@ pytestmark = pytest.mark.ros
 @pytest.fixture
 def ros(ros_domain):
     """Return the harness with as many executor threads as the node's own main() uses."""
+    fresh_domain()
     harness = RosHarness(num_threads=EXECUTOR_THREADS)
     try:
         yield harness

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 
-from conftest import find_bag, REPO, RosHarness, synthetic_map
+from conftest import find_bag, fresh_domain, REPO, RosHarness, synthetic_map
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from lifecycle_msgs.msg import Transition
@@ -41,6 +41,7 @@ pytestmark = pytest.mark.ros
 @pytest.fixture
 def ros(ros_domain):
     """Return the harness with as many executor threads as the node's own main() uses."""
+    fresh_domain()
     harness = RosHarness(num_threads=EXECUTOR_THREADS)
     try:
         yield harness
