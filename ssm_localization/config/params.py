@@ -25,6 +25,7 @@ from typing import Any, TypeVar
 
 from .localization import LocalizerConfig
 from .mapping import IndexConfig, TopologyConfig
+from .tracking import TrackerConfig
 from ..files.reading import echo
 from ..files.yaml_input import load_yaml_file
 
@@ -190,21 +191,31 @@ def laser_pose_of_section(section: dict) -> tuple[float, float, float] | None:
 
 
 #: keys of a flat params file; a ROS params file may also hold the nodes' own parameters
-KNOWN_TOP_LEVEL = ('index', 'localizer', 'laser_x', 'laser_y', 'laser_yaw')
+KNOWN_TOP_LEVEL = ('index', 'localizer', 'tracker', 'laser_x', 'laser_y', 'laser_yaw')
+
+
+def _node_params(data: dict, node: str) -> dict:
+    """
+    Return the (unflattened) parameters of ``node`` in a loaded params file.
+
+    Unknown keys of a flat file raise ``ValueError``.
+    """
+    ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
+    section = node_section(data, node)
+    if any('.' in str(k) for k in section):
+        section = unflatten({str(k): v for k, v in section.items()})
+    unknown = sorted(str(k) for k in section if k not in KNOWN_TOP_LEVEL)
+    if unknown and not ros_file:
+        raise ValueError(f'unknown parameter {echo(unknown[0])} (known: '
+                         f'{", ".join(KNOWN_TOP_LEVEL)})')
+    return section
 
 
 def load_configs(path: str | Path | None, node: str = 'global_localizer'):
     """``(IndexConfig, LocalizerConfig)`` from a params file (defaults where absent)."""
     data = load_yaml_mapping(path) if path else {}
-    ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
     try:
-        section = node_section(data, node)
-        if any('.' in str(k) for k in section):
-            section = unflatten({str(k): v for k, v in section.items()})
-        unknown = sorted(str(k) for k in section if k not in KNOWN_TOP_LEVEL)
-        if unknown and not ros_file:
-            raise ValueError(f'unknown parameter {echo(unknown[0])} (known: index, localizer, '
-                             'laser_x, laser_y, laser_yaw)')
+        section = _node_params(data, node)
         index_cfg = from_dict(IndexConfig, section.get('index'), 'index.')
         loc_cfg = from_dict(LocalizerConfig, section.get('localizer'), 'localizer.')
         pose = laser_pose_of_section(section)
@@ -214,6 +225,16 @@ def load_configs(path: str | Path | None, node: str = 'global_localizer'):
     except (TypeError, ValueError) as exc:
         raise ValueError(f'{path}: {exc}') from None
     return index_cfg, loc_cfg
+
+
+def load_tracker_config(path: str | Path | None,
+                        node: str = 'global_localizer') -> TrackerConfig:
+    """Return the :class:`TrackerConfig` of a params file's ``tracker`` section (or defaults)."""
+    data = load_yaml_mapping(path) if path else {}
+    try:
+        return from_dict(TrackerConfig, _node_params(data, node).get('tracker'), 'tracker.')
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{path}: {exc}') from None
 
 
 def load_index_config(path: str | Path) -> IndexConfig:

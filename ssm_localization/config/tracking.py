@@ -1,0 +1,92 @@
+"""Tracker settings (``localization/tracker.py``): motion model, search window, decisions."""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+import math
+
+from .fields import param
+
+#: fields that must be > 0 (the rest must be >= 0); tuples are checked element by element
+_POSITIVE = {'min_step_std', 'no_odom_std', 'max_odom_step', 'window_sigmas', 'window_xy',
+             'window_yaw', 'yaw_step', 'gate_chi2', 'weak_std', 'max_position_std', 'rival_chi2'}
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """
+    Parameters of the tracker (the global localizer it falls back on has its own).
+
+    Lengths in metres, angles in radians. The motion noise follows AMCL's ``diff`` odometry
+    model: the odometry increment is split into a rotation, a translation and a rotation; their
+    variances grow with the motion (``odom_alphas``: AMCL's ``alpha1..alpha4`` with their
+    meaning), plus a floor.
+    """
+
+    # -- motion model (prediction)
+    odom_alphas: tuple[float, float, float, float] = param(
+        (0.01, 0.001, 0.01, 0.005),
+        "AMCL's odom_alpha1..4: rotation variance per rad^2 turned and per m^2 travelled, "
+        'translation variance per m^2 travelled and per rad^2 turned')
+    min_step_std: tuple[float, float] = param(
+        (0.05, math.radians(2.0)), 'noise added to every prediction, (metres, rad) std: '
+        'odometry and scan stamps are never quite in step')
+    no_odom_std: tuple[float, float] = param(
+        (1.0, math.radians(45.0)), 'std of the motion between two scans when there is no '
+        'odometry (the pose is predicted to stay put), (metres, rad)')
+    max_odom_step: float = param(
+        5.0, 'an odometry increment longer than this between two scans is a jump (reset or '
+        'glitch): predicted as no odometry, m')
+    # -- search window around the prediction
+    window_sigmas: float = param(3.0, 'the window spans the prediction +- this many std')
+    window_xy: tuple[float, float] = param(
+        (0.3, 1.5), 'half-width of the searched window of positions, (min, max) metres')
+    window_yaw: tuple[float, float] = param(
+        (math.radians(6.0), math.radians(30.0)), 'half-width of the searched yaws, (min, max) rad')
+    yaw_step: float = param(math.radians(1.0), 'yaw step of the windowed search, rad')
+    track_hypotheses: int = param(3, 'search leaves refined beside the prediction itself')
+    gate_chi2: float = param(
+        16.3, 'squared Mahalanobis distance of a refined pose from the prediction beyond which '
+        'it is not the tracked pose (chi-square, 3 dof, 99.9 %)')
+    weak_std: float = param(
+        0.1, "position directions along which the scan's std exceeds this (a corridor's axis) "
+        'take the prediction in, metres')
+    # -- decisions
+    min_score: float = param(
+        0.4, 'a tracked pose scoring less (explained fraction minus the through-wall penalty) '
+        'has lost the track: global localization runs on the same scan')
+    max_position_std: float = param(
+        0.25, 'a larger position std along the weakest direction after fusing the prediction: '
+        'ambiguous, m')
+    rival_margin: float = param(
+        0.02, 'a rival in the window, distinct along a direction the scan determines, scoring '
+        'within this of the best: ambiguous')
+    rival_chi2: float = param(
+        9.0, "squared Mahalanobis distance (in the two poses' summed scan covariances) beyond "
+        'which two poses are distinct')
+    check_score: float = param(
+        0.75, 'a tracked pose scoring less than this and check_drop less than the median of the '
+        'last ok scores is cross-checked by global localization on the same scan (a kidnap into '
+        'a look-alike corridor fits like that)')
+    check_drop: float = param(0.1, 'see check_score')
+    switch_margin: float = param(
+        0.05, 'a cross-check answer distinct from the tracked pose and scoring at least this '
+        'much better takes over (ok) or makes the track ambiguous')
+    check_history: int = param(3, 'last ok scores whose median check_drop is measured from')
+    check_hypotheses: int = param(3, 'places elsewhere the cross-check refines')
+    max_misses: int = param(
+        3, 'scans in a row without a verified pose after which the track is dropped and the '
+        'tracker is lost')
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            values = value if isinstance(value, tuple) else (value,)
+            least = 'positive' if f.name in _POSITIVE else 'non-negative'
+            if not all(isinstance(v, (int, float)) and math.isfinite(v)
+                       and (v > 0 if f.name in _POSITIVE else v >= 0) for v in values):
+                raise ValueError(f'TrackerConfig.{f.name} must be {least} and finite, got '
+                                 f'{value!r}')
+        for name in ('window_xy', 'window_yaw'):
+            if getattr(self, name)[0] > getattr(self, name)[1]:
+                raise ValueError(f'TrackerConfig.{name} must be (min, max) with min <= max, got '
+                                 f'{getattr(self, name)!r}')

@@ -1,0 +1,393 @@
+"""
+Tracking at sensor rate with odometry, with global localization as the fallback (issue 11).
+
+Per scan (``Tracker.track``):
+1. predict: the last pose moved by the odometry increment since the last scan, its covariance
+   grown with the motion (``motion.py``, AMCL's ``diff`` model); without odometry the pose stays
+   and its covariance grows by ``no_odom_std``;
+2. search: the localizer's correlative branch and bound over a window around the predicted laser
+   pose (``window_sigmas`` standard deviations, bounded by ``window_xy`` / ``window_yaw``); the
+   prediction itself and the best ``track_hypotheses`` leaves are refined on the wall surface;
+3. gate and verify: refined poses further than ``gate_chi2`` (Mahalanobis, prediction and scan
+   covariances summed) from the prediction are not the tracked pose; the rest are ray-cast
+   (``GlobalLocalizer.verify``) and the best score wins;
+4. fuse: the winner is fused with the prediction in information form (``fusion.py``), which
+   keeps the scan where its walls pin the pose down and the prediction along what they leave
+   free (a corridor's axis; ``weak_std``); the fused pose is scored and ray-cast again, so every
+   reported pose is one that was verified;
+5. decide: ``ok`` when the verified score is at least ``min_score``, the fused position std is
+   at most ``max_position_std`` and no rival in the window, distinct along a direction the
+   scan determines, scores within ``rival_margin``; ``ambiguous`` for the last two (the track
+   goes on);
+6. cross-check a doubtful ``ok``: a score under ``check_score`` and ``check_drop`` below the
+   median of the last ones (the fit a scan gets in a look-alike corridor after a kidnap), or a
+   prediction too uncertain for the window (no odometry): the localizer's correlative search
+   over the whole map looks for a better place; only if it finds one does the whole global
+   pipeline run, and its ``ok`` answer takes over;
+7. fall back: when verification fails (a kidnap, a wrong start, a collapsed fit) the same scan
+   goes through global localization: an ``ok`` there is a relocalization, anything else is
+   reported as such (never ``ok``) and counts as a miss; after ``max_misses`` misses in a row
+   the tracker is lost and localizes every scan globally until an ``ok``.
+Before the first fix every scan is localized globally; ``set_prior`` (``initialpose``) starts a
+track from a given pose, which the next scan verifies like any other prediction.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+import time
+
+import numpy as np
+
+from .fusion import fuse_weak, mahalanobis2
+from .localizer import (distinct, GlobalLocalizer, Hypothesis, Localization, position_std,
+                        Query)
+from .motion import check_odometry, Increment, predict
+from ..config.tracking import TrackerConfig
+from ..transforms import apply, Pose2, wrap_angle
+
+STATUSES = ('ok', 'ambiguous', 'failed')
+#: where a result's pose came from: the track, global localization, or nowhere verified
+MODES = ('tracked', 'relocalized', 'lost')
+#: covariance of a prior given without one: 0.5 m, 15 deg
+DEFAULT_PRIOR_STD = (0.5, math.radians(15.0))
+
+
+@dataclass
+class TrackResult:
+    """
+    The answer for one scan.
+
+    ``pose`` is the robot base in the map frame (the best guess when not ``ok``; None when there
+    is none), ``predicted`` the motion prediction it started from.
+    """
+
+    status: str
+    pose: Pose2 | None
+    covariance: np.ndarray = field(default_factory=lambda: np.diag([1e3, 1e3, 1e3]))
+    mode: str = 'lost'
+    stamp: float = math.nan
+    latency_ms: float = 0.0
+    score: float = math.nan
+    node: int = -1
+    message: str = ''
+    predicted: Pose2 | None = None
+    localization: Localization | None = None    # the global answer, when global localization ran
+
+    @property
+    def ok(self) -> bool:
+        return self.status == 'ok'
+
+
+@dataclass
+class _Attempt:
+    """The outcome of tracking one scan around a prediction."""
+
+    status: str
+    message: str
+    pose: Pose2 | None = None
+    covariance: np.ndarray | None = None
+    score: float = math.nan
+    truncated: bool = False      # the prediction's uncertainty reached beyond the window
+
+
+class Tracker:
+    """
+    Pose tracking on the map of a :class:`GlobalLocalizer`, which it falls back on when lost.
+
+    Not thread-safe: one caller feeds it scans in order.
+    """
+
+    def __init__(self, localizer: GlobalLocalizer, config: TrackerConfig | None = None):
+        if not isinstance(localizer, GlobalLocalizer):
+            raise ValueError('the tracker needs a GlobalLocalizer built on a map index '
+                             f'(got {type(localizer).__name__}: no map?)')
+        self.localizer = localizer
+        self.config = config or TrackerConfig()
+        self._pose: Pose2 | None = None
+        self._cov = np.eye(3)
+        self._odom: Pose2 | None = None
+        self._misses = 0
+        self._recent: list[float] = []          # scores of the last ok answers
+        self.relocalizations = 0
+
+    # -- state ----------------------------------------------------------------------------------
+    @property
+    def pose(self) -> Pose2 | None:
+        """Return the current belief (base in the map frame); None when lost."""
+        return self._pose
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Return the covariance of the current belief."""
+        return self._cov.copy()
+
+    @property
+    def lost(self) -> bool:
+        """Tell whether there is no track (the next scan is localized globally)."""
+        return self._pose is None
+
+    def reset(self) -> None:
+        """Forget the track (the next scan is localized globally) and the odometry reference."""
+        self._pose, self._odom, self._misses = None, None, 0
+        self._cov = np.eye(3)
+        self._recent.clear()
+
+    def set_prior(self, pose: Pose2, covariance: np.ndarray | None = None) -> None:
+        """
+        Start tracking from ``pose`` (base, map frame), e.g. an ``initialpose``.
+
+        The prior is not reported as verified: the next scan is tracked around it (the window
+        from its covariance, bounded) and falls back on global localization if it does not fit.
+        ``ValueError`` for a pose or covariance that is not finite, or a covariance that is not
+        a symmetric positive definite 3x3 matrix.
+        """
+        pose = check_odometry(pose)
+        if covariance is None:
+            xy, yaw = DEFAULT_PRIOR_STD
+            cov = np.diag([xy ** 2, xy ** 2, yaw ** 2])
+        else:
+            cov = np.asarray(covariance, float)
+            if cov.shape != (3, 3) or not np.all(np.isfinite(cov)):
+                raise ValueError(f'prior covariance must be a finite 3x3 matrix, got shape '
+                                 f'{cov.shape}')
+            cov = 0.5 * (cov + cov.T)
+            if np.linalg.eigvalsh(cov).min() <= 0.0:
+                raise ValueError('prior covariance must be positive definite')
+        self._pose = (pose[0], pose[1], float(wrap_angle(pose[2])))
+        self._cov, self._misses = cov, 0
+
+    # -- per scan -------------------------------------------------------------------------------
+    def track(self, scan, odom=None, stamp: float = math.nan) -> TrackResult:
+        """
+        Track one scan.
+
+        ``scan`` is a :class:`Query` or has LaserScan fields (``ranges``, ``angle_min``,
+        ``angle_increment``, ``range_min``, ``range_max``: a ``ScanRecord`` or a
+        sensor_msgs/LaserScan); ``odom`` is the odometry pose ``(x, y, yaw)`` of the base in the
+        odom frame at the scan's time, or None. Bad odometry or a bad scan give a ``failed``
+        result with the reason and leave the state as it was (a bad scan still moves the
+        prediction by the odometry).
+        """
+        t0 = time.perf_counter()
+        try:
+            odom = None if odom is None else check_odometry(odom)
+        except ValueError as exc:
+            return self._result(t0, stamp, 'failed', None, f'bad odometry: {exc}')
+        inc, note = None, ''
+        if odom is not None and self._odom is not None:
+            inc = Increment.between(self._odom, odom)
+            if inc.trans > self.config.max_odom_step:
+                inc, note = None, (f'odometry jumped {inc.trans:.1f} m: predicted without it; ')
+        self._odom = odom
+        pred = pred_cov = None
+        if self._pose is not None:
+            pred, pred_cov = predict(self._pose, self._cov, inc, self.config)
+            self._pose, self._cov = pred, pred_cov
+        try:
+            query = scan if isinstance(scan, Query) else self.localizer.prepare_scan(
+                scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
+                scan.range_max)
+        except (AttributeError, TypeError, ValueError) as exc:
+            self._miss()
+            return self._result(t0, stamp, 'failed', pred, f'{note}bad scan: {exc}',
+                                predicted=pred, mode='lost' if pred is None else 'tracked')
+        if pred is None:
+            return self._relocalize(t0, stamp, query, note + 'no track: ')
+        attempt = self._track(query, pred, pred_cov)
+        if attempt.status == 'failed':
+            return self._relocalize(t0, stamp, query, f'{note}track lost ({attempt.message}): ',
+                                    pred, pred_cov)
+        if attempt.truncated or self._doubtful(attempt.score):
+            return self._cross_check(t0, stamp, query, attempt, pred, note)
+        return self._keep(t0, stamp, attempt, pred, note + attempt.message)
+
+    # -- internals ------------------------------------------------------------------------------
+    def _track(self, query: Query, pred: Pose2, pred_cov: np.ndarray) -> _Attempt:
+        """Search, refine, gate, verify and fuse around one prediction."""
+        cfg, loc = self.config, self.localizer
+        laser = loc.laser_pose(pred)
+        lcov = _laser_covariance(pred_cov, pred[2], loc.config.laser_pose)
+        std = np.sqrt(np.maximum(np.diag(lcov), 0.0))
+        reach = cfg.window_sigmas * std
+        hx, hy = (float(np.clip(r, *cfg.window_xy)) for r in reach[:2])
+        hyaw = float(np.clip(reach[2], *cfg.window_yaw))
+        truncated = bool(max(reach[:2]) > cfg.window_xy[1] or reach[2] > cfg.window_yaw[1])
+        n = int(math.ceil(hyaw / cfg.yaw_step))
+        yaws = laser[2] + cfg.yaw_step * np.arange(-n, n + 1)
+        leaves = loc.search_hypotheses(query, [], window=(laser[0] - hx, laser[1] - hy,
+                                                          laser[0] + hx, laser[1] + hy),
+                                       yaws=yaws)
+        hyps = [Hypothesis(source='prior', initial_pose=laser)] + leaves[:cfg.track_hypotheses]
+        refined = loc.refine(query, hyps, limit=len(hyps))
+        gated = [h for h in refined
+                 if mahalanobis2(h.pose, pred, pred_cov + h.covariance) <= cfg.gate_chi2]
+        if not gated:
+            return _Attempt('failed', f'no pose within the gate of the prediction '
+                                      f'({len(refined)} refined)')
+        gated = gated[:max(loc.config.verify_hypotheses, 1)]
+        loc.verify(query, gated)
+        gated.sort(key=lambda h: -h.score)
+        best = gated[0]
+        if best.score < cfg.min_score:
+            return _Attempt('failed', f'verification failed: explained {best.explained:.0%}, '
+                                      f'through walls {best.contradicting:.0%}, score '
+                                      f'{best.score:.2f}')
+        pose, cov = fuse_weak(best.pose, best.covariance, pred, pred_cov, cfg.weak_std)
+        fused = self._verified(query, best, pose)
+        if fused.score < cfg.min_score:
+            fused, pose, cov = best, best.pose, best.covariance     # the scan's own pose
+        common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated}
+        rivals = [h for h in gated[1:] if h.score >= best.score - cfg.rival_margin
+                  and mahalanobis2(h.pose, best.pose, h.covariance + best.covariance)
+                  > cfg.rival_chi2]
+        if rivals:
+            return _Attempt('ambiguous', f'{len(rivals) + 1} distinct poses near the prediction '
+                                         f'fit about equally well', **common)
+        std_xy = position_std(cov)
+        if std_xy > cfg.max_position_std:
+            return _Attempt('ambiguous', f'position std {std_xy:.2f} m along the weakest '
+                                         f'direction even with the prediction', **common)
+        return _Attempt('ok', f'tracked: explained {best.explained:.0%}, through walls '
+                              f'{fused.contradicting:.0%}, position std {std_xy * 1e3:.0f} mm',
+                        **common)
+
+    def _verified(self, query: Query, best: Hypothesis, pose: Pose2) -> Hypothesis:
+        """
+        Verify ``pose``, ``best`` moved by the fusion: explained fraction and ray casting.
+
+        Returns ``best`` itself when the fusion left it where it was (within 1 cm, 0.2 deg).
+        """
+        loc = self.localizer
+        if mahalanobis2(pose, best.pose, np.diag([0.01 ** 2, 0.01 ** 2, 0.003 ** 2])) <= 1.0:
+            return best
+        laser = loc.laser_pose(pose)
+        # the explained fraction as refine() measures it, with the wall offset it estimated
+        r, _, valid = loc.surface.signed_distance(apply(laser, query.features.points))
+        r = r + (best.depth - loc.surface.depth)
+        explained = np.where(valid, np.exp(-0.5 * (r / loc.config.score_sigma) ** 2), 0.0)
+        h = Hypothesis(source='prior', initial_pose=laser, laser_pose=laser, pose=pose,
+                       covariance=best.covariance, explained=float(explained.mean()),
+                       depth=best.depth, refined=True)
+        loc.verify(query, [h])
+        return h
+
+    def _doubtful(self, score: float) -> bool:
+        """
+        Tell whether a tracked score is poor and clearly worse than the last ones.
+
+        That is the kind of fit a scan gets in a look-alike corridor after a kidnap (or in a
+        crowd).
+        """
+        cfg = self.config
+        if not self._recent:
+            return False
+        return score < cfg.check_score and score < float(np.median(self._recent)) - cfg.check_drop
+
+    def _cross_check(self, t0: float, stamp: float, query: Query, attempt: _Attempt,
+                     pred: Pose2, note: str) -> TrackResult:
+        """
+        Check a doubtful tracked scan against the rest of the map.
+
+        First cheaply: the localizer's correlative search over the whole map at the tracked yaw,
+        its flip and the map-aligned yaws; its leaves distinct from the tracked pose are refined
+        and verified. Only if one scores ``switch_margin`` better does the whole global pipeline
+        run: its ``ok`` answer takes over (a relocalization), anything else makes the track
+        ``ambiguous``.
+        """
+        cfg, loc = self.config, self.localizer
+        lc = loc.config
+        seed = Hypothesis(source='prior', initial_pose=loc.laser_pose(attempt.pose))
+        others = [h for h in loc.search_hypotheses(query, [seed])
+                  if distinct(loc.base_pose(h.initial_pose), attempt.pose, lc.distinct_xy,
+                              lc.distinct_yaw)]
+        rival = None
+        if others:
+            refined = loc.refine(query, others, limit=cfg.check_hypotheses)
+            refined = [h for h in refined if distinct(h.pose, attempt.pose, lc.distinct_xy,
+                                                      lc.distinct_yaw)][:2]
+            loc.verify(query, refined)
+            rival = max(refined, key=lambda h: h.score, default=None)
+        if rival is None or rival.score < attempt.score + cfg.switch_margin:
+            found = 'no other place' if rival is None else f'elsewhere {rival.score:.2f}'
+            return self._keep(t0, stamp, attempt, pred, f'{note}{attempt.message} (a poor fit, '
+                              f'score {attempt.score:.2f}, cross-checked: {found})')
+        glob = loc.localize_query(query)
+        why = (f'{note}the tracked pose fits poorly (score {attempt.score:.2f}) and another place '
+               f'better (score {rival.score:.2f}): ')
+        if glob.status == 'ok' and distinct(glob.pose, attempt.pose, lc.distinct_xy,
+                                            lc.distinct_yaw):
+            return self._adopt(t0, stamp, glob, why + 'kidnapped? relocalized: ', pred)
+        if glob.status == 'ok':
+            return self._keep(t0, stamp, attempt, pred, why + 'global localization confirms '
+                              'the track', glob)
+        self._miss()
+        return self._result(t0, stamp, 'ambiguous', attempt.pose, why + f'global localization '
+                            f'{glob.status}: {glob.message}', covariance=attempt.covariance,
+                            score=attempt.score, predicted=pred, mode='tracked',
+                            localization=glob)
+
+    def _keep(self, t0: float, stamp: float, attempt: _Attempt, pred: Pose2, message: str,
+              glob: Localization | None = None) -> TrackResult:
+        """Make the tracked pose the belief."""
+        self._pose, self._cov, self._misses = attempt.pose, attempt.covariance, 0
+        if attempt.status == 'ok':
+            self._remember(attempt.score)
+        return self._result(t0, stamp, attempt.status, attempt.pose, message,
+                            covariance=attempt.covariance, score=attempt.score, predicted=pred,
+                            mode='tracked', localization=glob)
+
+    def _adopt(self, t0: float, stamp: float, glob: Localization, message: str,
+               pred: Pose2 | None) -> TrackResult:
+        """Make an ``ok`` global answer the belief: a relocalization."""
+        self._pose, self._cov, self._misses = glob.pose, glob.covariance, 0
+        self._recent.clear()
+        self._remember(glob.score)
+        self.relocalizations += 1
+        return self._result(t0, stamp, 'ok', glob.pose, message + glob.message,
+                            covariance=glob.covariance, score=glob.score, node=glob.node,
+                            predicted=pred, mode='relocalized', localization=glob)
+
+    def _remember(self, score: float) -> None:
+        self._recent.append(score)
+        del self._recent[:-max(self.config.check_history, 1)]
+
+    def _relocalize(self, t0: float, stamp: float, query: Query, why: str,
+                    pred: Pose2 | None = None, pred_cov: np.ndarray | None = None) -> TrackResult:
+        """Localize ``query`` globally; an ``ok`` answer becomes the track."""
+        glob = self.localizer.localize_query(query)
+        if glob.status == 'ok':
+            where = ''
+            if pred is not None:
+                m2 = mahalanobis2(glob.pose, pred, pred_cov + glob.covariance)
+                where = ('far from the prediction (kidnapped?): ' if m2 > self.config.gate_chi2
+                         else 'near the prediction: ')
+            return self._adopt(t0, stamp, glob, f'{why}relocalized {where}', pred)
+        self._miss()
+        return self._result(t0, stamp, glob.status, glob.pose if glob.pose is not None else pred,
+                            f'{why}global localization {glob.status}: {glob.message}',
+                            covariance=glob.covariance, score=glob.score, node=glob.node,
+                            predicted=pred, mode='lost', localization=glob)
+
+    def _miss(self) -> None:
+        """Count a scan without a verified pose; too many in a row and the track is dropped."""
+        self._misses += 1
+        if self._misses > self.config.max_misses:
+            self._pose, self._misses = None, 0
+            self._recent.clear()
+
+    @staticmethod
+    def _result(t0: float, stamp: float, status: str, pose: Pose2 | None, message: str,
+                **kwargs) -> TrackResult:
+        return TrackResult(status=status, pose=pose, stamp=stamp, message=message,
+                           latency_ms=(time.perf_counter() - t0) * 1e3, **kwargs)
+
+
+def _laser_covariance(cov: np.ndarray, base_yaw: float, laser_on_base: Pose2) -> np.ndarray:
+    """Return the covariance of the laser pose ``base * laser_on_base`` (first order)."""
+    off = apply((0.0, 0.0, base_yaw), laser_on_base[:2])[0]      # base -> laser, in the map
+    jac = np.array([[1.0, 0.0, -off[1]], [0.0, 1.0, off[0]], [0.0, 0.0, 1.0]])
+    return jac @ np.asarray(cov, float) @ jac.T
+
+
+__all__ = ['MODES', 'STATUSES', 'TrackResult', 'Tracker']
