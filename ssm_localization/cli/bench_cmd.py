@@ -1,9 +1,9 @@
-"""``ssm_localization bench {scanmatch,index,localize,soak}``: benchmarks that print tables."""
+"""``ssm_localization bench {scanmatch,index,localize,soak,track}``: benchmarks that print tables."""
 from __future__ import annotations
 
 import argparse
 
-from ..bench import index, localize, scanmatch, soak
+from ..bench import index, localize, scanmatch, soak, track
 
 BENCHES = {
     'scanmatch': (scanmatch, 'scan matching accuracy (paper Table 2, Fig. 4, real scan pairs)'),
@@ -12,6 +12,8 @@ BENCHES = {
                            'set'),
     'soak': (soak, 'memory and pose rate of global_localizer in continuous mode on a looping '
                    'bag'),
+    'track': (track, 'tracking with odometry: success, precision, first fix, recovery after '
+                     'kidnaps and latency per CARMEN log'),
 }
 
 

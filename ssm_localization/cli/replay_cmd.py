@@ -1,7 +1,10 @@
 """
 ``ssm_localization replay BAG -o RESULTS.csv``.
 
-Single-scan localization of every scan of a bag.
+Localize every scan of a bag: by default every scan on its own (single-scan global
+localization); ``--track`` tracks the scans in order with the bag's ``/odom`` (without odometry
+when the bag has none), falling back on global localization when the track is lost
+(``localization/tracker.py``).
 """
 from __future__ import annotations
 
@@ -9,12 +12,14 @@ import argparse
 import time
 
 from .arguments import add_max_map_cells, nonnegative_int
-from ..config.params import load_configs
+from ..config.params import load_configs, load_tracker_config
 from ..evaluation.plotting import check_plot_path, plot_replay
-from ..evaluation.replay import replay_scans, summarize, write_results_csv
+from ..evaluation.replay import match_truth, replay_scans, summarize, write_results_csv
+from ..evaluation.tracking import summarize_track, track_scans
 from ..files.writing import check_output_file
 from ..io.bag_reader import read_bag
 from ..localization.localizer import GlobalLocalizer
+from ..localization.tracker import Tracker
 from ..mapping.index import build_index, load_index
 from ..mapping.map_io import load_map_yaml
 from ..progress import TqdmProgress
@@ -29,6 +34,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--scan-topic', default='/scan')
     parser.add_argument('--params', help='params YAML (flat, or a ROS params file)')
     parser.add_argument('--plot', help='write a PNG of the map, ground truth and estimates')
+    parser.add_argument('--track', action='store_true',
+                        help='track the scans in order with /odom (tracker parameters: the '
+                             '`tracker` section of --params); global localization when lost')
+    parser.add_argument('--no-odom', action='store_true',
+                        help='with --track: ignore /odom (track without odometry)')
     parser.add_argument('--limit', type=nonnegative_int, default=0,
                         help='localize only the first N scans (0 = all)')
     add_max_map_cells(parser)
@@ -40,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         check_plot_path(args.plot)
     index_cfg, loc_cfg = load_configs(args.params)
+    track_cfg = load_tracker_config(args.params) if args.track else None
     index = load_index(args.index, max_cells=args.max_map_cells) if args.index else None
     grid = load_map_yaml(args.map, max_cells=args.max_map_cells) if args.map else None
     own_map = index is not None or grid is not None     # the bag's /map is not used then
@@ -58,10 +69,21 @@ def run(args: argparse.Namespace) -> int:
         print(f'indexed map: {len(index.features)} nodes in {time.perf_counter() - t0:.2f} s')
     localizer = GlobalLocalizer(index, loc_cfg)
     scans = bag.scans[:args.limit] if args.limit > 0 else bag.scans
-    rows = replay_scans(localizer, scans, bag.ground_truth, progress=not args.quiet)
+    if track_cfg is not None:
+        stamps = [s.stamp for s in scans]
+        odom = match_truth(stamps, {} if args.no_odom else bag.odom)
+        if not any(o is not None for o in odom):
+            print('tracking without odometry (no /odom in the bag)' if not args.no_odom
+                  else 'tracking without odometry (--no-odom)')
+        rows = track_scans(Tracker(localizer, track_cfg), scans, odom,
+                           match_truth(stamps, bag.ground_truth), progress=not args.quiet)
+    else:
+        rows = replay_scans(localizer, scans, bag.ground_truth, progress=not args.quiet)
     write_results_csv(rows, args.output)
     print(f'wrote {len(rows)} rows to {args.output}')
-    if any(r.has_truth for r in rows):
+    if track_cfg is not None:
+        print(summarize_track(rows).format('track'))
+    elif any(r.has_truth for r in rows):
         print(summarize(rows).format('replay'))
     if args.plot:
         plot_replay(index, rows, args.plot)

@@ -49,6 +49,17 @@ def _pyplot():
     return plt
 
 
+def _draw_map(ax, grid) -> tuple[float, float, float, float]:
+    """Draw ``grid`` (OccupancyMap) on ``ax`` in map coordinates; return its extent."""
+    h, w = grid.data.shape
+    ox, oy, _ = grid.origin
+    extent = (ox, ox + w * grid.resolution, oy, oy + h * grid.resolution)
+    img = np.where(grid.data < 0, 0.75, 1.0 - np.clip(grid.data, 0, 100) / 100.0)
+    ax.imshow(img, cmap='gray', origin='lower', extent=extent, vmin=0, vmax=1,
+              interpolation='nearest')
+    return extent
+
+
 def _map_figure(grid, width: float, extra_height: float):
     """
     Return a figure showing ``grid`` (OccupancyMap) in map coordinates.
@@ -57,13 +68,8 @@ def _map_figure(grid, width: float, extra_height: float):
     """
     plt = _pyplot()
     h, w = grid.data.shape
-    ox, oy, _ = grid.origin
-    extent = (ox, ox + w * grid.resolution, oy, oy + h * grid.resolution)
-    img = np.where(grid.data < 0, 0.75, 1.0 - np.clip(grid.data, 0, 100) / 100.0)
     fig, ax = plt.subplots(figsize=(width, width * h / max(w, 1) + extra_height))
-    ax.imshow(img, cmap='gray', origin='lower', extent=extent, vmin=0, vmax=1,
-              interpolation='nearest')
-    return plt, fig, ax, extent
+    return plt, fig, ax, _draw_map(ax, grid)
 
 
 def plot_replay(index, rows, path, title: str = '') -> None:
@@ -92,6 +98,54 @@ def plot_replay(index, rows, path, title: str = '') -> None:
     ax.set_title(title or 'single-scan global localization')
     ax.legend(loc='upper right', fontsize=8)
     ax.set_aspect('equal')
+    fig.tight_layout()
+    _save(plt, fig, path, dpi=110)
+
+
+def plot_track(grid, rows, path, kidnaps=(), title: str = '') -> None:
+    """
+    Plot a tracked replay: the map with the ground-truth path and the estimates by mode (top),
+    the position error and the latency of every scan with kidnaps and relocalizations (below).
+    """
+    plt = _pyplot()
+    aspect = grid.data.shape[0] / max(grid.data.shape[1], 1)
+    fig, (ax, ax_err, ax_lat) = plt.subplots(
+        3, 1, figsize=(9, 9 * aspect + 4.0),
+        gridspec_kw={'height_ratios': [max(6.0 * aspect, 3.0), 1.0, 1.0]})
+    _draw_map(ax, grid)
+    gt = np.array([(r.gt_x, r.gt_y) for r in rows])
+    ax.plot(gt[:, 0], gt[:, 1], '-', color='k', lw=0.6, alpha=0.6, label='ground truth')
+    marks = {'tracked': ('tab:green', '.'), 'relocalized': ('tab:blue', 'o'),
+             'lost': ('tab:red', 'x')}
+    for mode, (color, marker) in marks.items():
+        sel = np.array([(r.x, r.y) for r in rows if r.mode == mode and not np.isnan(r.x)])
+        if len(sel):
+            ax.plot(sel[:, 0], sel[:, 1], marker, color=color, ms=4, ls='none',
+                    label=f'{mode} ({len(sel)})')
+    wrong = [r for r in rows if r.status == 'ok' and r.has_truth and not r.correct]
+    for r in wrong:
+        ax.plot([r.x, r.gt_x], [r.y, r.gt_y], color='tab:red', lw=1.0)
+    ax.set_title(title or 'tracking')
+    ax.set_aspect('equal')
+    ax.legend(loc='upper right', fontsize=8)
+    k = np.arange(len(rows))
+    err = np.hypot(gt[:, 0] - [r.x for r in rows], gt[:, 1] - [r.y for r in rows])
+    ok = np.array([r.status == 'ok' for r in rows])
+    ax_err.semilogy(k[ok], np.maximum(err[ok], 1e-3), '.', color='tab:green', ms=3, label='ok')
+    ax_err.semilogy(k[~ok], np.maximum(np.nan_to_num(err[~ok], nan=1e-3), 1e-3), 'x',
+                    color='tab:orange', ms=4, label='not ok')
+    ax_err.axhline(0.5, color='tab:red', lw=0.6)
+    ax_err.set_ylabel('position error [m]')
+    ax_lat.plot(k, [r.latency_ms for r in rows], '-', color='tab:gray', lw=0.7)
+    ax_lat.set_ylabel('latency [ms]')
+    ax_lat.set_xlabel('scan')
+    for a in (ax_err, ax_lat):
+        for j in kidnaps:
+            a.axvline(j, color='tab:purple', lw=0.8, ls='--')
+        for j in k[[r.mode == 'relocalized' for r in rows]]:
+            a.axvline(j, color='tab:blue', lw=0.4, alpha=0.5)
+        a.set_xlim(-1, len(rows))
+    ax_err.legend(loc='upper right', fontsize=7)
     fig.tight_layout()
     _save(plt, fig, path, dpi=110)
 

@@ -1,0 +1,127 @@
+"""
+``ssm_localization bench track``: tracking with odometry, kidnaps and relocalization (issue 11).
+
+Sets (``--sets``): ``intel``, ``aces``, ``fr079``, the shared CARMEN logs. Per set the map is built
+from the even-numbered scans (cached in ``--work``, as ``bench localize`` does) and two sequences
+are tracked from scratch (``io/sequences.py``):
+- ``real``: the odd-numbered scans in order (1-2 m apart on Intel and ACES, 0.2 m on Freiburg
+  079), with the raw odometry rebuilt from the log's ODOM lines, expressed in an odom frame
+  offset from the map frame;
+- ``kidnap``: three segments of a fifth of them taken at 0, 2/5 and 4/5, the odometry going on
+  across each join by a 10 cm step forward, so it does not show the kidnap the ground truth makes.
+Prints per sequence: counts, per-scan success (``ok`` within 0.5 m / 5 deg) and precision, the
+scans to the first fix and to the recovery after each kidnap (the first right ``ok``, the kidnap
+scan counted as 1), the wrong ``ok`` answers before a fix or a recovery, latency p50 / p95 (all
+scans, global relocalizations included; and the tracked scans alone), then the issue's targets.
+``--single`` adds single-scan global localization of the same scans (how often a scan alone is
+not ``ok`` and how often the tracker is right there: the corridors), ``--no-odom`` tracking
+without odometry, ``--plot-dir`` one figure per sequence (``plot_track``).
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import time
+
+import numpy as np
+
+from .localize import _data_dir, real_map, REAL_SETS
+from ..config.params import load_configs, load_tracker_config
+from ..evaluation.plotting import plot_track
+from ..evaluation.replay import replay_scans, summarize
+from ..evaluation.tracking import summarize_track, track_scans, TrackSummary
+from ..io.sequences import kidnap_sequence, log_sequence, ScanSequence
+from ..localization.localizer import GlobalLocalizer
+from ..localization.tracker import Tracker
+from ..mapping.index import build_index
+
+#: the issue's targets: success, precision, scans to a fix, latency p50 / p95 (ms)
+TARGET_SUCCESS = 0.97
+TARGET_PRECISION = 0.995
+TARGET_FIX_SCANS = 3
+TARGET_P50_MS = 30.0
+TARGET_P95_MS = 100.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--sets', nargs='+', default=list(REAL_SETS),
+                        choices=list(REAL_SETS) + ['all'])
+    parser.add_argument('--scans', type=int, default=0,
+                        help='use the first N odd-numbered scans of each log (0 = all)')
+    parser.add_argument('--quick', action='store_true', help='--scans 200')
+    parser.add_argument('--single', action='store_true',
+                        help='also localize every scan on its own (single-scan global '
+                             'localization) and compare')
+    parser.add_argument('--no-odom', action='store_true',
+                        help='also track the real sequence without odometry')
+    parser.add_argument('--data', default=None, help='shared data dir (default ../shared/data)')
+    parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
+    parser.add_argument('--params', help='params YAML applied to every set (index, localizer '
+                                         'and tracker sections)')
+    parser.add_argument('--plot-dir', help='write one figure per sequence here')
+
+
+def verdict(ts: TrackSummary) -> str:
+    """Compare a tracked sequence with the issue's targets, one line."""
+    s = ts.summary
+    fixes = [ts.first_fix] + ts.recoveries
+    checks = [
+        (f'success >= {TARGET_SUCCESS:.0%}', s.success_rate >= TARGET_SUCCESS),
+        (f'precision >= {TARGET_PRECISION:.1%}', s.precision >= TARGET_PRECISION),
+        (f'fixes within {TARGET_FIX_SCANS} scans',
+         all(f.scans is not None and f.scans <= TARGET_FIX_SCANS for f in fixes)),
+        ('no wrong ok before a fix', ts.wrong_before_fix == 0),
+        (f'p50 <= {TARGET_P50_MS:.0f} ms', ts.latency[0] <= TARGET_P50_MS),
+        (f'p95 <= {TARGET_P95_MS:.0f} ms', ts.latency[1] <= TARGET_P95_MS),
+    ]
+    missed = [name for name, good in checks if not good]
+    return '  targets: ' + ('all met' if not missed else 'MISSED ' + ', '.join(missed))
+
+
+def _track(localizer: GlobalLocalizer, config, seq: ScanSequence, odometry: bool = True):
+    rows = track_scans(Tracker(localizer, config), seq.scans, seq.odom if odometry else None,
+                       seq.truth, progress=False)
+    return rows, summarize_track(rows, seq.kidnaps or None)
+
+
+def _single(localizer: GlobalLocalizer, seq: ScanSequence, tracked) -> str:
+    """Single-scan global localization of the same scans, against the tracked rows."""
+    rows = replay_scans(localizer, seq.scans, dict(zip((s.stamp for s in seq.scans), seq.truth)),
+                        progress=False)
+    s = summarize(rows)
+    alone = [k for k, r in enumerate(rows) if r.status != 'ok']
+    kept = sum(tracked[k].status == 'ok' and tracked[k].correct for k in alone)
+    return (f'  single-scan: success {s.success_rate:.1%} precision {s.precision:.2%}, latency '
+            f'p50 {s.latency_p50_ms:.0f} p95 {s.latency_p95_ms:.0f} ms; {len(alone)} scans not '
+            f'ok on their own ({s.ambiguous} ambiguous, {s.failed} failed), tracked right and '
+            f'ok on {kept} of them')
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.quick:
+        args.scans = 200
+    sets = list(REAL_SETS) if 'all' in args.sets else args.sets
+    data, work = _data_dir(args.data), Path(args.work)
+    index_cfg, loc_cfg = load_configs(args.params)
+    track_cfg = load_tracker_config(args.params)
+    for name in sets:
+        t0 = time.perf_counter()
+        log, grid = real_map(data, work, REAL_SETS[name])
+        localizer = GlobalLocalizer(build_index(grid, index_cfg), loc_cfg)
+        odd = np.arange(1, len(log), 2)
+        real = log_sequence(log, odd[:args.scans] if args.scans > 0 else odd, name=name)
+        runs = [('real', real, True), ('kidnap', kidnap_sequence(real), True)]
+        if args.no_odom:
+            runs.append(('no-odom', real, False))
+        for label, seq, odometry in runs:
+            rows, ts = _track(localizer, track_cfg, seq, odometry)
+            print(ts.format(f'{name:6s} {label:7s}'), flush=True)
+            print(verdict(ts), flush=True)
+            if label == 'real' and args.single:
+                print(_single(localizer, seq, rows), flush=True)
+            if args.plot_dir:
+                Path(args.plot_dir).mkdir(parents=True, exist_ok=True)
+                plot_track(grid, rows, Path(args.plot_dir) / f'track_{name}_{label}.png',
+                           seq.kidnaps, title=f'{name} {label}')
+        print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
+    return 0
