@@ -25,4 +25,8 @@ mkdir -p maps bags
 "$SSM" simulate "$DATA/maps/depot.yaml" -o bags/depot_sim_fov180 -n 20 --beams 180 \
     --fov 180 --noise 0.01 --clutter 0 --short-fraction 0 --seed 2 --force --quiet
 
+# Tracking bags with /odom and kidnaps (Intel protocol piece, ACES look-alike corridors); they use
+# the maps written above.
+"$ROOT/.venv/bin/python" scripts/make_track_bag.py --data "$DATA" --force
+
 du -ab maps bags | sort -k2

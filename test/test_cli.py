@@ -1,10 +1,12 @@
-"""`ssm_localization replay` through cli.main: RESULTS.csv contract, plot, user errors."""
+"""`ssm_localization replay` through cli.main: RESULTS.csv contract, plot, user errors; --track
+and `bench track`."""
 from __future__ import annotations
 
 import csv
 import math
+import re
 
-from conftest import find_bag
+from conftest import find_bag, shared_data
 import numpy as np
 import pytest
 from ssm_localization import read_bag, save_map_yaml, write_bag
@@ -140,3 +142,101 @@ def test_replay_cli_index_file(depot_bag, tmp_path, capsys):
     _, rows = _read_csv(out)
     assert len(rows) == 2 and all(r['status'] == 'ok' for r in rows)
     assert np.isfinite([float(r['x']) for r in rows]).all()
+
+
+# --------------------------------------------------------------------------- --track
+
+@pytest.fixture(scope='module')
+def intel_track():
+    path = find_bag('intel_track')
+    return path, read_bag(path)
+
+
+def _right(row, bag) -> bool:
+    truth = bag.ground_truth[float(row['stamp'])]
+    return (row['status'] == 'ok'
+            and math.hypot(float(row['x']) - truth[0], float(row['y']) - truth[1]) <= 0.5
+            and abs(math.remainder(float(row['yaw']) - truth[2], 2 * math.pi))
+            <= math.radians(5))
+
+
+def test_replay_track_writes_one_row_per_scan_and_recovers(intel_track, tmp_path, capsys):
+    path, bag = intel_track
+    out = tmp_path / 'track.csv'
+    rc = main(['replay', str(path), '-o', str(out), '--track', '--quiet'])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    header, rows = _read_csv(out)
+    assert header[:len(REQUIRED)] == REQUIRED and 'mode' in header
+    assert len(rows) == len(bag.scans) == 180
+    assert [float(r['stamp']) for r in rows] == pytest.approx([s.stamp for s in bag.scans])
+    assert all(float(r['latency_ms']) > 0 for r in rows)
+    assert {r['mode'] for r in rows} <= {'tracked', 'relocalized', 'lost'}
+    assert sum(r['mode'] == 'tracked' for r in rows) >= 170
+    success = sum(_right(r, bag) for r in rows) / len(rows)
+    assert success >= 0.97
+    wrong = [r['stamp'] for r in rows if r['status'] == 'ok' and not _right(r, bag)]
+    assert len(wrong) <= 1, wrong
+    line = next(ln for ln in captured.out.splitlines() if ln.startswith('track:'))
+    assert 'success' in line and 'precision' in line and 'first fix 1 ' in line, line
+    recoveries = re.search(r'recoveries ([0-9, ]+|-) \|', line).group(1)
+    counts = [int(v) for v in recoveries.split(',')]
+    assert len(counts) >= 2 and max(counts) <= 3, line       # the two kidnaps, at least
+
+
+def test_replay_track_without_odometry(intel_track, tmp_path, capsys):
+    path, bag = intel_track
+    no_odom = tmp_path / 'no_odom'
+    scans = bag.scans[:40]
+    write_bag(no_odom, map=bag.map, scans=scans,
+              ground_truth={s.stamp: bag.ground_truth[s.stamp] for s in scans})
+    out = tmp_path / 'track.csv'
+    rc = main(['replay', str(no_odom), '-o', str(out), '--track', '--quiet'])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert 'tracking without odometry (no /odom in the bag)' in captured.out
+    _, rows = _read_csv(out)
+    assert len(rows) == 40
+    ok = [r for r in rows if r['status'] == 'ok']
+    assert len(ok) >= 36 and sum(_right(r, bag) for r in ok) >= len(ok) - 1
+    rc = main(['replay', str(path), '-o', str(out), '--track', '--no-odom', '--limit', '5',
+               '--quiet'])
+    assert rc == 0 and 'tracking without odometry (--no-odom)' in capsys.readouterr().out
+
+
+def test_replay_track_without_a_map_is_a_clear_error(intel_track, tmp_path, capsys):
+    _, bag = intel_track
+    no_map = tmp_path / 'no_map'
+    write_bag(no_map, map=None, scans=bag.scans[:3])
+    rc = main(['replay', str(no_map), '-o', str(tmp_path / 'o.csv'), '--track', '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 2 and 'no /map message' in err, err
+    assert not (tmp_path / 'o.csv').exists()
+
+
+def test_replay_track_refuses_bad_tracker_params(intel_track, tmp_path, capsys):
+    path, _ = intel_track
+    params = tmp_path / 'p.yaml'
+    params.write_text('tracker:\n  odom_alphas: [0.1, 0.1, -1.0, 0.1]\n')
+    rc = main(['replay', str(path), '-o', str(tmp_path / 'o.csv'), '--track', '--params',
+               str(params), '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 2 and 'odom_alphas' in err, err
+
+
+def test_bench_track_prints_both_sequences_and_the_targets(tmp_path, capsys):
+    data = shared_data()
+    shared_data('carmen', 'aces-corrected.log.gz')
+    rc = main(['bench', 'track', '--sets', 'aces', '--scans', '60', '--data', str(data),
+               '--work', str(tmp_path / 'work'), '--plot-dir', str(tmp_path / 'plots')])
+    out = capsys.readouterr().out
+    assert rc == 0
+    real = next(ln for ln in out.splitlines() if ln.startswith('aces   real'))
+    kidnap = next(ln for ln in out.splitlines() if ln.startswith('aces   kidnap'))
+    assert 'n=60 ' in real and 'n=36 ' in kidnap, out
+    counts = re.search(r'recoveries ([0-9, ]+) \|', kidnap).group(1).split(',')
+    assert len(counts) == 2 and all(1 <= int(c) <= 3 for c in counts), kidnap
+    assert out.count('targets:') == 2
+    assert sorted(p.name for p in (tmp_path / 'plots').iterdir()) == [
+        'track_aces_kidnap.png', 'track_aces_real.png']
+    assert (tmp_path / 'work' / 'aces_even.yaml').is_file()
