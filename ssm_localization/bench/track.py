@@ -13,24 +13,30 @@ Prints per sequence: counts, per-scan success (``ok`` within 0.5 m / 5 deg) and 
 scans to the first fix and to the recovery after each kidnap (the first right ``ok``, the kidnap
 scan counted as 1), the wrong ``ok`` answers before a fix or a recovery, latency p50 / p95 (all
 scans, global relocalizations included; and the tracked scans alone), then the issue's targets.
-``--single`` adds single-scan global localization of the same scans (how often a scan alone is
-not ``ok`` and how often the tracker is right there: the corridors), ``--no-odom`` tracking
-without odometry, ``--plot-dir`` one figure per sequence (``plot_track``).
+``--random-kidnaps N`` adds N random kidnaps per log (seeded): five scans tracked before, four
+after a jump of at least 1 m anywhere in the log, the same odometry step across it; it counts the
+wrong ``ok`` answers after the kidnap and the scans to recovery (the protocol has only two
+kidnaps per log). ``--single`` adds single-scan global localization of the same scans (how often
+a scan alone is not ``ok`` and how often the tracker is right there: the corridors),
+``--no-odom`` tracking without odometry, ``--plot-dir`` one figure per sequence
+(``plot_track``).
 """
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 from pathlib import Path
 import time
 
 import numpy as np
+from tqdm import tqdm
 
 from .localize import _data_dir, real_map, REAL_SETS
 from ..config.params import load_configs, load_tracker_config
 from ..evaluation.plotting import plot_track
 from ..evaluation.replay import replay_scans, summarize
 from ..evaluation.tracking import summarize_track, track_scans, TrackSummary
-from ..io.sequences import kidnap_sequence, log_sequence, ScanSequence
+from ..io.sequences import kidnap_sequence, log_sequence, ScanSequence, splice
 from ..localization.localizer import GlobalLocalizer
 from ..localization.tracker import Tracker
 from ..mapping.index import build_index
@@ -54,6 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'localization) and compare')
     parser.add_argument('--no-odom', action='store_true',
                         help='also track the real sequence without odometry')
+    parser.add_argument('--random-kidnaps', type=int, default=0, metavar='N',
+                        help='also N random kidnaps per log (wrong ok after them, recovery)')
+    parser.add_argument('--seed', type=int, default=1, help='seed of the random kidnaps')
     parser.add_argument('--data', default=None, help='shared data dir (default ../shared/data)')
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
     parser.add_argument('--params', help='params YAML applied to every set (index, localizer '
@@ -97,6 +106,27 @@ def _single(localizer: GlobalLocalizer, seq: ScanSequence, tracked) -> str:
             f'ok on {kept} of them')
 
 
+def random_kidnaps(localizer: GlobalLocalizer, config, seq: ScanSequence, count: int,
+                   seed: int) -> str:
+    """Track ``count`` random kidnaps of ``seq`` (see the module doc); one line of figures."""
+    rng = np.random.default_rng(seed)
+    truth = np.array(seq.truth)
+    wrong, recoveries = 0, []
+    for _ in tqdm(range(count), desc=f'{seq.name} kidnaps', leave=False):
+        while True:
+            i, j = (int(v) for v in rng.integers(4, len(seq) - 4, 2))
+            if np.hypot(*(truth[i, :2] - truth[j, :2])) >= 1.0:
+                break
+        _, ts = _track(localizer, config, splice(seq, [(i - 4, i + 1), (j, j + 4)]))
+        wrong += ts.recoveries[0].wrong_ok
+        recoveries.append(ts.recoveries[0].scans)
+    counts = Counter('never' if r is None else str(r) for r in recoveries)
+    within = sum(r is not None and r <= TARGET_FIX_SCANS for r in recoveries)
+    return (f'  random kidnaps: {count}, wrong ok after them {wrong}, recovered within '
+            f'{TARGET_FIX_SCANS} scans {within}/{count} (scans: '
+            + ', '.join(f'{k}: {v}' for k, v in sorted(counts.items())) + ')')
+
+
 def run(args: argparse.Namespace) -> int:
     if args.quick:
         args.scans = 200
@@ -123,5 +153,8 @@ def run(args: argparse.Namespace) -> int:
                 Path(args.plot_dir).mkdir(parents=True, exist_ok=True)
                 plot_track(grid, rows, Path(args.plot_dir) / f'track_{name}_{label}.png',
                            seq.kidnaps, title=f'{name} {label}')
+        if args.random_kidnaps > 0:
+            print(random_kidnaps(localizer, track_cfg, real, args.random_kidnaps, args.seed),
+                  flush=True)
         print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
     return 0

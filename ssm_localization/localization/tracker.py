@@ -15,9 +15,10 @@ Per scan (``Tracker.track``):
    keeps the scan where its walls pin the pose down and the prediction along what they leave
    free (a corridor's axis; ``weak_std``); the fused pose is scored and ray-cast again, so every
    reported pose is one that was verified;
-5. decide: ``ok`` when the verified score is at least ``min_score``, the fused position std is
-   at most ``max_position_std`` and no rival in the window, distinct along a direction the
-   scan determines, scores within ``rival_margin``; ``ambiguous`` for the last two (the track
+5. decide: ``ok`` when the verified score is at least ``min_score`` with at most the
+   localizer's ``max_contradicting`` of the beams through walls, the fused position std is at
+   most ``max_position_std`` and no rival in the window, distinct along a direction the scan
+   determines, scores within ``rival_margin``; ``ambiguous`` for the last two (the track
    goes on);
 6. cross-check a doubtful ``ok``: a score under ``check_score`` and ``check_drop`` below the
    median of the last ones (the fit a scan gets in a look-alike corridor after a kidnap), or a
@@ -225,20 +226,19 @@ class Tracker:
         if not gated:
             return _Attempt('failed', f'no pose within the gate of the prediction '
                                       f'({len(refined)} refined)')
-        gated = gated[:max(loc.config.verify_hypotheses, 1)]
-        loc.verify(query, gated)
-        gated.sort(key=lambda h: -h.score)
+        gated = self._verify_contenders(query, gated)
         best = gated[0]
-        if best.score < cfg.min_score:
+        if not self._plausible(best):
             return _Attempt('failed', f'verification failed: explained {best.explained:.0%}, '
                                       f'through walls {best.contradicting:.0%}, score '
                                       f'{best.score:.2f}')
         pose, cov = fuse_weak(best.pose, best.covariance, pred, pred_cov, cfg.weak_std)
         fused = self._verified(query, best, pose)
-        if fused.score < cfg.min_score:
+        if not self._plausible(fused):
             fused, pose, cov = best, best.pose, best.covariance     # the scan's own pose
         common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated}
-        rivals = [h for h in gated[1:] if h.score >= best.score - cfg.rival_margin
+        rivals = [h for h in gated[1:]
+                  if h.score >= best.score - cfg.rival_margin and self._plausible(h)
                   and mahalanobis2(h.pose, best.pose, h.covariance + best.covariance)
                   > cfg.rival_chi2]
         if rivals:
@@ -251,6 +251,29 @@ class Tracker:
         return _Attempt('ok', f'tracked: explained {best.explained:.0%}, through walls '
                               f'{fused.contradicting:.0%}, position std {std_xy * 1e3:.0f} mm',
                         **common)
+
+    def _verify_contenders(self, query: Query, gated: list[Hypothesis]) -> list[Hypothesis]:
+        """
+        Ray-cast the gated poses that could win or be a rival; return the verified, best first.
+
+        ``gated`` comes best explained first. A score never exceeds the explained fraction, so
+        once the best plausible score is known, a pose explaining less than it minus
+        ``rival_margin`` can be neither (the localizer's ``verify_contenders`` rule, with the
+        tracker's margin): most scans cast one pose.
+        """
+        batch, margin = gated[:1], self.config.rival_margin
+        while batch:
+            self.localizer.verify(query, batch)
+            top = max((h.score for h in gated
+                       if h.check is not None and self._plausible(h)), default=-math.inf)
+            batch = [h for h in gated if h.check is None and h.explained >= top - margin]
+        verified = [h for h in gated if h.check is not None]
+        return sorted(verified, key=lambda h: (not self._plausible(h), -h.score))
+
+    def _plausible(self, h: Hypothesis) -> bool:
+        """Tell whether a verified pose explains enough of the scan, few beams through walls."""
+        return (h.score >= self.config.min_score
+                and h.contradicting <= self.localizer.config.max_contradicting)
 
     def _verified(self, query: Query, best: Hypothesis, pose: Pose2) -> Hypothesis:
         """
