@@ -18,7 +18,9 @@ after a jump of at least 1 m anywhere in the log, the same odometry step across 
 wrong ``ok`` answers after the kidnap and the scans to recovery (the protocol has only two
 kidnaps per log). ``--single`` adds single-scan global localization of the same scans (how often
 a scan alone is not ``ok`` and how often the tracker is right there: the corridors),
-``--no-odom`` tracking without odometry, ``--plot-dir`` one figure per sequence
+``--no-odom`` tracking without odometry, ``--max-range R`` also tracks the real sequence with
+every reading beyond R metres made a no-return (a short laser: long corridors a single scan
+cannot place; add ``--single`` to see how often), ``--plot-dir`` one figure per sequence
 (``plot_track``).
 """
 from __future__ import annotations
@@ -60,6 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'localization) and compare')
     parser.add_argument('--no-odom', action='store_true',
                         help='also track the real sequence without odometry')
+    parser.add_argument('--max-range', type=float, default=0.0, metavar='R',
+                        help='also track the real sequence with the laser limited to R metres')
     parser.add_argument('--random-kidnaps', type=int, default=0, metavar='N',
                         help='also N random kidnaps per log (wrong ok after them, recovery)')
     parser.add_argument('--seed', type=int, default=1, help='seed of the random kidnaps')
@@ -143,11 +147,13 @@ def run(args: argparse.Namespace) -> int:
         runs = [('real', real, True), ('kidnap', kidnap_sequence(real), True)]
         if args.no_odom:
             runs.append(('no-odom', real, False))
+        if args.max_range > 0:
+            runs.append((f'{args.max_range:g}m', real.limited(args.max_range), True))
         for label, seq, odometry in runs:
             rows, ts = _track(localizer, track_cfg, seq, odometry)
             print(ts.format(f'{name:6s} {label:7s}'), flush=True)
             print(verdict(ts), flush=True)
-            if label == 'real' and args.single:
+            if odometry and not seq.kidnaps and args.single:
                 print(_single(localizer, seq, rows), flush=True)
             if args.plot_dir:
                 Path(args.plot_dir).mkdir(parents=True, exist_ok=True)

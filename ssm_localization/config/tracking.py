@@ -8,7 +8,8 @@ from .fields import param
 
 #: fields that must be > 0 (the rest must be >= 0); tuples are checked element by element
 _POSITIVE = {'min_step_std', 'no_odom_std', 'max_odom_step', 'window_sigmas', 'window_xy',
-             'window_yaw', 'yaw_step', 'gate_chi2', 'weak_std', 'max_position_std', 'rival_chi2'}
+             'window_yaw', 'yaw_step', 'gate_chi2', 'weak_std', 'max_position_std', 'rival_chi2',
+             'rival_prior_chi2'}
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,9 @@ class TrackerConfig:
     rival_chi2: float = param(
         9.0, "squared Mahalanobis distance (in the two poses' summed scan covariances) beyond "
         'which two poses are distinct')
+    rival_prior_chi2: float = param(
+        6.0, 'a rival further from the prediction than the chosen pose by more than this '
+        '(squared Mahalanobis distance; 6: a likelihood ratio of 5 %) is not a rival')
     check_score: float = param(
         0.75, 'a tracked pose scoring less than this and check_drop less than the median of the '
         'last ok scores is cross-checked by global localization on the same scan (a kidnap into '

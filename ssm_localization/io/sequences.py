@@ -55,6 +55,17 @@ class ScanSequence:
                  for k, s in enumerate(self.scans)]
         return dataclasses.replace(self, scans=scans)
 
+    def limited(self, max_range: float) -> 'ScanSequence':
+        """
+        Return the sequence with every reading beyond ``max_range`` made a no-return (``inf``).
+
+        A shorter laser: in long corridors a scan no longer sees the far walls that place it.
+        """
+        scans = [dataclasses.replace(
+            s, ranges=np.where(s.ranges > max_range, np.inf, s.ranges).astype(s.ranges.dtype))
+            for s in self.scans]
+        return dataclasses.replace(self, scans=scans, name=f'{self.name}_{max_range:g}m')
+
     def by_stamp(self) -> tuple[dict[float, Pose2], dict[float, Pose2]]:
         """Return ``(odom, ground truth)`` keyed by scan stamp, as a bag holds them."""
         stamps = [s.stamp for s in self.scans]

@@ -18,8 +18,9 @@ Per scan (``Tracker.track``):
 5. decide: ``ok`` when the verified score is at least ``min_score`` with at most the
    localizer's ``max_contradicting`` of the beams through walls, the fused position std is at
    most ``max_position_std`` and no rival in the window, distinct along a direction the scan
-   determines, scores within ``rival_margin``; ``ambiguous`` for the last two (the track
-   goes on);
+   determines, scores within ``rival_margin`` and fits the prediction about as well
+   (``rival_prior_chi2``; among poses the scan cannot tell apart the prediction picks);
+   ``ambiguous`` for the last two (the track goes on);
 6. cross-check a doubtful ``ok``: a score under ``check_score`` and ``check_drop`` below the
    median of the last ones (the fit a scan gets in a look-alike corridor after a kidnap), or a
    prediction too uncertain for the window (no odometry): the localizer's correlative search
@@ -221,24 +222,29 @@ class Tracker:
                                        yaws=yaws)
         hyps = [Hypothesis(source='prior', initial_pose=laser)] + leaves[:cfg.track_hypotheses]
         refined = loc.refine(query, hyps, limit=len(hyps))
-        gated = [h for h in refined
-                 if mahalanobis2(h.pose, pred, pred_cov + h.covariance) <= cfg.gate_chi2]
+        # squared Mahalanobis distance of each refined pose from the prediction
+        prior = {id(h): mahalanobis2(h.pose, pred, pred_cov + h.covariance) for h in refined}
+        gated = [h for h in refined if prior[id(h)] <= cfg.gate_chi2]
         if not gated:
             return _Attempt('failed', f'no pose within the gate of the prediction '
                                       f'({len(refined)} refined)')
-        gated = self._verify_contenders(query, gated)
-        best = gated[0]
-        if not self._plausible(best):
-            return _Attempt('failed', f'verification failed: explained {best.explained:.0%}, '
-                                      f'through walls {best.contradicting:.0%}, score '
-                                      f'{best.score:.2f}')
+        verified = self._verify_contenders(query, gated)
+        top = verified[0]
+        if not self._plausible(top):
+            return _Attempt('failed', f'verification failed: explained {top.explained:.0%}, '
+                                      f'through walls {top.contradicting:.0%}, score '
+                                      f'{top.score:.2f}')
+        # the poses the scan cannot tell apart: the prediction picks among them
+        contenders = [h for h in verified
+                      if self._plausible(h) and h.score >= top.score - cfg.rival_margin]
+        best = min(contenders, key=lambda h: prior[id(h)])
         pose, cov = fuse_weak(best.pose, best.covariance, pred, pred_cov, cfg.weak_std)
         fused = self._verified(query, best, pose)
         if not self._plausible(fused):
             fused, pose, cov = best, best.pose, best.covariance     # the scan's own pose
         common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated}
-        rivals = [h for h in gated[1:]
-                  if h.score >= best.score - cfg.rival_margin and self._plausible(h)
+        rivals = [h for h in contenders if h is not best
+                  and prior[id(h)] <= prior[id(best)] + cfg.rival_prior_chi2
                   and mahalanobis2(h.pose, best.pose, h.covariance + best.covariance)
                   > cfg.rival_chi2]
         if rivals:
