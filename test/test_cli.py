@@ -1,5 +1,8 @@
-"""`ssm_localization replay` through cli.main: RESULTS.csv contract, plot, user errors; --track
-and `bench track`."""
+"""
+Test `ssm_localization replay` through cli.main.
+
+RESULTS.csv contract, plot, user errors; ``--track`` and ``bench track``.
+"""
 from __future__ import annotations
 
 import csv

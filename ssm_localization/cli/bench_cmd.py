@@ -1,4 +1,4 @@
-"""``ssm_localization bench {scanmatch,index,localize,soak,track}``: benchmarks that print tables."""
+"""``ssm_localization bench {scanmatch,index,localize,soak,track}``: benchmarks, as tables."""
 from __future__ import annotations
 
 import argparse

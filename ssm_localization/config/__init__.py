@@ -13,6 +13,7 @@ from .simulation import SimulationConfig
 from .tracking import TrackerConfig
 
 __all__ = ['HAND_WEIGHTS', 'LEARNED_WEIGHTS', 'PREPARE_FIELDS', 'IndexConfig', 'LocalizerConfig',
-           'MapBuildConfig', 'MatcherConfig', 'SimulationConfig', 'TopologyConfig', 'TrackerConfig',
+           'MapBuildConfig', 'MatcherConfig', 'SimulationConfig', 'TopologyConfig',
+           'TrackerConfig',
            'config_from_json', 'config_to_json', 'flatten', 'from_dict', 'load_configs',
            'load_index_config', 'load_tracker_config', 'load_yaml_mapping', 'unflatten']

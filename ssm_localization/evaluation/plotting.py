@@ -104,8 +104,10 @@ def plot_replay(index, rows, path, title: str = '') -> None:
 
 def plot_track(grid, rows, path, kidnaps=(), title: str = '') -> None:
     """
-    Plot a tracked replay: the map with the ground-truth path and the estimates by mode (top),
-    the position error and the latency of every scan with kidnaps and relocalizations (below).
+    Plot a tracked replay.
+
+    The map with the ground-truth path and the estimates by mode (top); the position error and
+    the latency of every scan, with the kidnaps and relocalizations (below).
     """
     plt = _pyplot()
     aspect = grid.data.shape[0] / max(grid.data.shape[1], 1)

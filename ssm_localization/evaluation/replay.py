@@ -115,8 +115,11 @@ def summarize(rows: Sequence[ResultRow]) -> Summary:
 
 
 def write_results_csv(rows: Iterable[ResultRow], path: str | Path) -> None:
-    """RESULTS.csv: the INTERFACES.md columns first, ground truth after (written atomically);
-    rows of a ``ResultRow`` subclass add its further columns."""
+    """
+    Write RESULTS.csv: the INTERFACES.md columns first, ground truth after (atomically).
+
+    Rows of a ``ResultRow`` subclass add its further columns.
+    """
     rows = list(rows)
     names = [f.name for f in fields(type(rows[0]) if rows else ResultRow)]
     with atomic_files(path, what='results file') as (tmp,), open(tmp, 'w', newline='') as fh:
