@@ -21,7 +21,7 @@ from ssm_localization.evaluation.tracking import (detected_losses, recovery_afte
 from ssm_localization.io.bag_records import ScanRecord
 from ssm_localization.io.sequences import kidnap_sequence, ScanSequence
 from ssm_localization.localization.fusion import fuse_weak, mahalanobis2
-from ssm_localization.localization.motion import check_odometry, Increment, predict
+from ssm_localization.localization.motion import check_pose, Increment, predict
 from ssm_localization.localization.tracker import Tracker
 from ssm_localization.transforms import compose, inverse
 
@@ -210,8 +210,8 @@ def test_increment_and_prediction_grow_with_motion():
     assert np.all(np.linalg.eigvalsh(cov) > 0)
     _, none = predict((0.0, 0.0, 0.0), np.zeros((3, 3)), None, cfg)
     assert np.sqrt(none[0, 0]) == pytest.approx(cfg.no_odom_std[0])
-    with pytest.raises(ValueError):
-        check_odometry((0.0, 0.0))
+    with pytest.raises(ValueError, match='odometry pose'):
+        check_pose((0.0, 0.0))
 
 
 def test_fusion_keeps_the_scan_where_it_is_sure_and_the_prediction_elsewhere():

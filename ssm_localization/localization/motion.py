@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from ..config.tracking import TrackerConfig
+from ..files.reading import echo
 from ..transforms import compose, inverse, Pose2, wrap_angle
 
 
@@ -41,14 +42,14 @@ class Increment:
         return cls(delta=delta, rot1=rot1, trans=trans, rot2=rot2)
 
 
-def check_odometry(pose) -> Pose2:
-    """Return an odometry pose as three finite floats; ``ValueError`` otherwise."""
+def check_pose(pose, what: str = 'odometry pose') -> Pose2:
+    """Return ``pose`` as three finite floats; ``ValueError`` naming ``what`` otherwise."""
     try:
         values = tuple(float(v) for v in pose)
     except (TypeError, ValueError):
-        raise ValueError(f'odometry pose must be (x, y, yaw), got {pose!r}') from None
+        raise ValueError(f'{what} must be (x, y, yaw), got {echo(pose)}') from None
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise ValueError(f'odometry pose must be three finite numbers (x, y, yaw), got {pose!r}')
+        raise ValueError(f'{what} must be three finite numbers (x, y, yaw), got {echo(pose)}')
     return values
 
 

@@ -44,7 +44,7 @@ import numpy as np
 from .fusion import fuse_weak, mahalanobis2
 from .localizer import (distinct, GlobalLocalizer, Hypothesis, Localization, position_std,
                         Query)
-from .motion import check_odometry, Increment, predict
+from .motion import check_pose, Increment, predict
 from ..config.tracking import TrackerConfig
 from ..transforms import apply, Pose2, wrap_angle
 
@@ -78,7 +78,16 @@ class TrackResult:
 
     @property
     def ok(self) -> bool:
+        """Tell whether the answer is confident (``status == 'ok'``)."""
         return self.status == 'ok'
+
+    def as_localization(self) -> Localization:
+        """Return the answer as a :class:`Localization` (what the nodes publish and report)."""
+        glob = self.localization
+        return Localization(status=self.status, pose=self.pose, covariance=self.covariance,
+                            node=self.node, score=self.score,
+                            candidates=list(glob.candidates) if glob is not None else [],
+                            latency_ms=self.latency_ms, message=f'{self.mode}: {self.message}')
 
 
 @dataclass
@@ -141,23 +150,31 @@ class Tracker:
 
         The prior is not reported as verified: the next scan is tracked around it (the window
         from its covariance, bounded) and falls back on global localization if it does not fit.
-        ``ValueError`` for a pose or covariance that is not finite, or a covariance that is not
-        a symmetric positive definite 3x3 matrix.
+        See :meth:`check_prior` for what is refused.
         """
-        pose = check_odometry(pose)
+        self._pose, self._cov = self.check_prior(pose, covariance)
+        self._misses = 0
+
+    @staticmethod
+    def check_prior(pose: Pose2, covariance: np.ndarray | None = None) -> tuple[Pose2, np.ndarray]:
+        """
+        Return a prior as ``(pose, covariance)``; default covariance: 0.5 m, 15 deg.
+
+        ``ValueError`` for a pose or covariance that is not finite, or a covariance that is not a
+        symmetric positive definite 3x3 matrix.
+        """
+        x, y, yaw = check_pose(pose, 'prior pose')
         if covariance is None:
-            xy, yaw = DEFAULT_PRIOR_STD
-            cov = np.diag([xy ** 2, xy ** 2, yaw ** 2])
-        else:
-            cov = np.asarray(covariance, float)
-            if cov.shape != (3, 3) or not np.all(np.isfinite(cov)):
-                raise ValueError(f'prior covariance must be a finite 3x3 matrix, got shape '
-                                 f'{cov.shape}')
-            cov = 0.5 * (cov + cov.T)
-            if np.linalg.eigvalsh(cov).min() <= 0.0:
-                raise ValueError('prior covariance must be positive definite')
-        self._pose = (pose[0], pose[1], float(wrap_angle(pose[2])))
-        self._cov, self._misses = cov, 0
+            xy, a = DEFAULT_PRIOR_STD
+            return (x, y, float(wrap_angle(yaw))), np.diag([xy ** 2, xy ** 2, a ** 2])
+        cov = np.asarray(covariance, float)
+        if cov.shape != (3, 3) or not np.all(np.isfinite(cov)):
+            raise ValueError(f'prior covariance must be a finite 3x3 matrix, got shape '
+                             f'{cov.shape}')
+        cov = 0.5 * (cov + cov.T)
+        if np.linalg.eigvalsh(cov).min() <= 0.0:
+            raise ValueError('prior covariance must be positive definite')
+        return (x, y, float(wrap_angle(yaw))), cov
 
     # -- per scan -------------------------------------------------------------------------------
     def track(self, scan, odom=None, stamp: float = math.nan) -> TrackResult:
@@ -173,7 +190,7 @@ class Tracker:
         """
         t0 = time.perf_counter()
         try:
-            odom = None if odom is None else check_odometry(odom)
+            odom = None if odom is None else check_pose(odom)
         except ValueError as exc:
             return self._result(t0, stamp, 'failed', None, f'bad odometry: {exc}')
         inc, note = None, ''

@@ -7,8 +7,9 @@ Lifecycle (rclpy.lifecycle; ``NODE/get_state``, ``NODE/change_state``):
   active. With ``autostart`` (default) the node configures and activates itself;
 - configure: reads the parameters, loads ``index_file`` or waits for a map on ``map`` (both are
   watched: see :mod:`ssm_localization.ros.index_source`), creates the publishers;
-- activate: scans are taken, the services localize, ``continuous`` mode runs,
-  ``localize_on_start`` localizes the first scans until an ``ok`` pose, ``/diagnostics`` ticks;
+- activate: scans are taken, the services localize, ``continuous`` mode runs, ``track`` mode
+  tracks, ``localize_on_start`` localizes the first scans until an ``ok`` pose,
+  ``/diagnostics`` ticks;
 - deactivate / cleanup / shutdown undo those steps; waiting calls get an answer saying why.
 
 Interfaces (docs INTERFACES.md): subscribes ``scan`` (LaserScan, sensor-data QoS) and ``map``
@@ -17,6 +18,13 @@ transient local), ``initialpose`` (with ``publish_initialpose``), ``candidates``
 transient local), ``topological_map`` (MarkerArray, transient local) and ``/diagnostics``;
 serves ``relocalize`` (std_srvs/Trigger) and ``global_localization`` (std_srvs/Empty), both
 "localize the next scan and publish".
+
+``mode: track`` (issue 11) tracks every scan with odometry (``localization/tracker.py``, glue in
+:mod:`ssm_localization.ros.tracking`): it subscribes ``odom`` (nav_msgs/Odometry; TF
+``odom_frame`` <- ``base_frame`` when the topic is silent and tf2_ros exists) and ``initialpose``
+(a prior), publishes ``global_pose`` for every scan tracked ``ok``, relocalizes globally by itself
+when the track is lost, and broadcasts map -> odom with ``publish_tf`` where tf2_ros exists, as
+AMCL does. The services' answers become the tracker's prior.
 """
 from __future__ import annotations
 
@@ -29,12 +37,12 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
-from nav_msgs.msg import OccupancyGrid
+from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
-from ssm_localization.config import IndexConfig, LocalizerConfig
+from ssm_localization.config import IndexConfig, LocalizerConfig, TrackerConfig
 from ssm_localization.localization.localizer import GlobalLocalizer
 from ssm_localization.mapping.index import build_index, load_index, save_index
 from ssm_localization.ros import markers
@@ -49,21 +57,25 @@ from ssm_localization.ros.lifecycle import (answer_invalid_transitions, FAILURE,
                                             schedule_autostart, state_id, state_label, SUCCESS,
                                             transition, UNCONFIGURED)
 from ssm_localization.ros.maps import usable_map
+from ssm_localization.ros.odometry import MapOdomBroadcaster, OdometryBuffer, OdometrySource
 from ssm_localization.ros.parameter_guard import ParameterGuard
 from ssm_localization.ros.parameters import (build_config, DYNAMIC, laser_pose_of,
                                              localizer_parameters)
 from ssm_localization.ros.qos import LATCHED_QOS, SERVICE_QOS
 from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox
+from ssm_localization.ros.tracking import TrackSession
 from std_srvs.srv import Empty, Trigger
 from visualization_msgs.msg import MarkerArray
 
-MODES = ('on_demand', 'continuous')
+MODES = ('on_demand', 'continuous', 'track')
 MARKER_PERIOD = 1.0          # seconds between marker updates in continuous mode
 DIAGNOSTICS_PERIOD = 1.0     # seconds between /diagnostics messages while active
 MAX_QUEUED_CALLS = 64        # service calls waiting for the next scan at once; more: refused
 # executor threads: one per waiting call, plus room for scans, maps, lifecycle and refusals
 EXECUTOR_THREADS = MAX_QUEUED_CALLS + 8
 ANSWER_SLACK = 120.0         # s beyond scan_timeout a call waits for the localization itself
+# odometry: best effort matches every publisher; room for the messages between two scans
+ODOM_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 def format_result(loc: Any) -> str:
@@ -76,7 +88,8 @@ def format_result(loc: Any) -> str:
 def check_configs(values: dict[str, Any]) -> str | None:
     """Why the core refuses the index / localizer config of these values, or None."""
     pose = laser_pose_of(values)
-    for cls, prefix in ((IndexConfig, 'index'), (LocalizerConfig, 'localizer')):
+    for cls, prefix in ((IndexConfig, 'index'), (LocalizerConfig, 'localizer'),
+                        (TrackerConfig, 'tracker')):
         try:
             build_config(cls, prefix, values, pose)
         except (ValueError, TypeError) as exc:
@@ -106,6 +119,8 @@ class GlobalLocalizerNode(LifecycleNode):
         self._variants: dict[tuple, GlobalLocalizer] = {}
         self._configured_parts = False
         self._workers: list[threading.Thread] = []
+        self._track_subs: list = []
+        self.session: TrackSession | None = None
         self._diag_timer = None
         self._destroying = False
         # always there, so a call in any state gets an answer (not a silent wait for a service)
@@ -172,6 +187,8 @@ class GlobalLocalizerNode(LifecycleNode):
                                                   callback_group=self._group)
         self._queue = RequestQueue(self._mailbox, MAX_QUEUED_CALLS, self._serve,
                                    self._no_scan_text)
+        if self.mode == 'track':
+            self._configure_tracking(values)
         self._configured_parts = True
         self.get_logger().info(f'configured: mode {self.mode}, base frame {self.base_frame}; '
                                f'map: {self.source.map_state()[1]}')
@@ -188,11 +205,14 @@ class GlobalLocalizerNode(LifecycleNode):
             self.marker_pub.publish(markers.marker_array(marks, frame, self._now_ns()))
         self._diag_timer = self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics,
                                              callback_group=self._group)
-        if self.mode == 'continuous':
+        if self.mode in ('continuous', 'track'):
             if self.get_parameter('localize_on_start').value:
-                self.get_logger().info('localize_on_start: continuous mode localizes every scan '
-                                       'anyway')
-            self._start_worker(self._continuous_loop, 'continuous_localizer')
+                self.get_logger().info(f'localize_on_start: {self.mode} mode localizes every '
+                                       'scan anyway')
+            if self.mode == 'track':
+                self._start_worker(self._track_loop, 'tracker')
+            else:
+                self._start_worker(self._continuous_loop, 'continuous_localizer')
         elif self.get_parameter('localize_on_start').value:
             self._start_worker(self._startup_loop, 'localize_on_start')
         self._publish_diagnostics()
@@ -246,6 +266,9 @@ class GlobalLocalizerNode(LifecycleNode):
         self._laser.close()
         self.destroy_subscription(self._map_sub)
         self.destroy_subscription(self._scan_sub)
+        for sub in self._track_subs:
+            self.destroy_subscription(sub)
+        self._track_subs, self.session = [], None
         for pub in (self.pose_pub, self.initialpose_pub, self.candidates_pub, self.marker_pub,
                     self.diagnostics_pub):
             self.destroy_lifecycle_publisher(pub)
@@ -263,6 +286,36 @@ class GlobalLocalizerNode(LifecycleNode):
         self._deactivate_parts('shutting down')
         self._cleanup_parts('shutting down')
         super().destroy_node()
+
+    def _configure_tracking(self, values: dict[str, Any]) -> None:
+        """Track mode: the tracker session, ``odom`` and ``initialpose``, the TF broadcaster."""
+        self.odom_frame = str(values['odom_frame']).lstrip('/')
+        buffer = OdometryBuffer(float(values['odom_max_age']))
+        odometry = OdometrySource(buffer, self.odom_frame, self.base_frame, self._laser.buffer)
+        broadcaster = MapOdomBroadcaster.for_node(self, self.odom_frame,
+                                                  float(values['transform_tolerance']))
+        if broadcaster is None:
+            self.get_logger().info('tf2_ros is not installed: map -> odom is not broadcast')
+        self.session = TrackSession(build_config(TrackerConfig, 'tracker', values,
+                                                 self.laser_pose),
+                                    odometry, broadcaster, self.get_logger().info)
+        self._track_subs = [
+            self.create_subscription(Odometry, 'odom', buffer.add, ODOM_QOS,
+                                     callback_group=self._group),
+            self.create_subscription(PoseWithCovarianceStamped, 'initialpose',
+                                     self._on_initialpose, 10, callback_group=self._group)]
+        if values['publish_initialpose']:
+            self.get_logger().warning('publish_initialpose is ignored in track mode (the node '
+                                      'takes initialpose as its prior)')
+
+    def _on_initialpose(self, msg: PoseWithCovarianceStamped) -> None:
+        if self.session is None:
+            return
+        try:
+            self.get_logger().info(self.session.prior_from_msg(msg,
+                                                               self._frame(self.source.served)))
+        except ValueError as exc:
+            self.get_logger().warning(f'initialpose ignored: {exc}')
 
     # ------------------------------------------------------------------ map and index
     def _build(self, occ, progress):
@@ -348,17 +401,17 @@ class GlobalLocalizerNode(LifecycleNode):
                 variant = self._variants[pose] = served.localizer.with_laser_pose(pose)
         return variant
 
-    def localize_msg(self, msg: LaserScan, verbose: bool = True) -> tuple[Any, str | None]:
-        """Localize one scan and publish; ``(Localization | None, reason | None)``."""
-        reason = self._not_ready()
-        if reason:
-            return None, reason
-        served = self.source.served
+    def _prepare(self, msg: LaserScan) -> tuple[ScanArgs, LaserMount] | str:
+        """
+        Return the scan's arguments and the laser mount, or why the scan is skipped.
+
+        The arguments are mirrored for an upside-down laser.
+        """
         args = scan_args_from_msg(msg)
         problem = scan_problem(args)
         if problem:
             self.get_logger().warning(f'skipping scan: {problem}', throttle_duration_sec=2.0)
-            return None, f'bad scan: {problem}'
+            return f'bad scan: {problem}'
         mount = self._laser.mount(msg.header.frame_id)
         if mount.mirrored:
             args = ScanArgs(args.ranges, -args.angle_min, -args.angle_increment,
@@ -366,6 +419,42 @@ class GlobalLocalizerNode(LifecycleNode):
         elif args.angle_increment < 0.0:
             self.get_logger().warning('negative angle_increment: mirrored (upside-down) laser? '
                                       'localizing the scan as given', once=True)
+        return args, mount
+
+    def track_msg(self, msg: LaserScan) -> Any:
+        """Track one scan (track mode) and publish; return the TrackResult, or None if skipped."""
+        if self._not_ready() or self.session is None:
+            return None
+        served = self.source.served
+        prepared = self._prepare(msg)
+        if isinstance(prepared, str):
+            return None
+        args, mount = prepared
+        localizer = self._localizer_for(served, mount)
+        with self._localize_lock:
+            try:
+                result = self.session.track(localizer, args, msg.header.stamp,
+                                            self._frame(served),
+                                            bool(self.get_parameter('publish_tf').value))
+            except Exception as exc:  # noqa: BLE001 - a bad scan must not kill the node
+                self.get_logger().warning(f'tracking error: {type(exc).__name__}: {exc}')
+                return None
+        self._publish_result(result.as_localization(), msg, args, mount, served, False)
+        if result.mode != 'tracked':
+            self.get_logger().info(f'track: {result.mode}, {result.status}: {result.message}',
+                                   throttle_duration_sec=1.0)
+        return result
+
+    def localize_msg(self, msg: LaserScan, verbose: bool = True) -> tuple[Any, str | None]:
+        """Localize one scan and publish; ``(Localization | None, reason | None)``."""
+        reason = self._not_ready()
+        if reason:
+            return None, reason
+        served = self.source.served
+        prepared = self._prepare(msg)
+        if isinstance(prepared, str):
+            return None, prepared
+        args, mount = prepared
         localizer = self._localizer_for(served, mount)
         with self._localize_lock:
             try:
@@ -404,7 +493,7 @@ class GlobalLocalizerNode(LifecycleNode):
             out = pose_with_covariance(loc, 0, frame)
             out.header.stamp = stamp
             self.pose_pub.publish(out)
-            if self.get_parameter('publish_initialpose').value:
+            if self.get_parameter('publish_initialpose').value and self.mode != 'track':
                 self.initialpose_pub.publish(out)
             log = self.get_logger().info if verbose else self.get_logger().debug
             log(f'{self.base_frame} in {frame}: {format_result(loc)}')
@@ -414,6 +503,8 @@ class GlobalLocalizerNode(LifecycleNode):
     # ------------------------------------------------------------------ services
     def _serve(self, msg: LaserScan) -> Answer:
         loc, reason = self.localize_msg(msg, verbose=True)
+        if reason is None and self.session is not None:
+            self.session.set_prior(loc.pose, loc.covariance)    # the track goes on from there
         return Answer(reason is None, format_result(loc) if reason is None else reason, loc)
 
     def _no_scan_text(self, timeout: float) -> str:
@@ -467,6 +558,20 @@ class GlobalLocalizerNode(LifecycleNode):
             loc, reason = self.localize_msg(msg, verbose=False)
             if reason and loc is not None:
                 self.get_logger().info(f'no pose: {reason}', throttle_duration_sec=2.0)
+
+    def _track_loop(self) -> None:
+        """Track mode: track the newest scan, again and again."""
+        done = self._mailbox.seq
+        while not self._stop.is_set():
+            got = self._mailbox.wait_newer(done, None, self._stop)
+            if got is None:
+                continue
+            msg, done = got
+            reason = self._not_ready()
+            if reason:
+                self.get_logger().info(f'not tracking: {reason}', throttle_duration_sec=5.0)
+                continue
+            self.track_msg(msg)
 
     def _startup_loop(self) -> None:
         """``localize_on_start``: localize incoming scans until the first ``ok`` pose."""

@@ -109,6 +109,11 @@ class LaserPoseSource:
         return source
 
     @property
+    def buffer(self) -> Any:
+        """Return the TF buffer, shared with the node's other TF users (None without tf2_ros)."""
+        return self._buffer
+
+    @property
     def uses_tf(self) -> bool:
         """Return True when TF is asked at all (tf2_ros importable or a stand-in buffer given)."""
         return self._buffer is not None

@@ -37,8 +37,10 @@ RANGES: dict[str, tuple[float, float]] = {
     'laser_yaw': (-2.0 * math.pi, 2.0 * math.pi),
     'max_map_cells': (0, INTEGER_MAX),
     'max_gvd_points': (0, INTEGER_MAX),
+    'odom_max_age': (0.0, 60.0),
+    'transform_tolerance': (0.0, 60.0),
 }
-NON_EMPTY = ('base_frame',)
+NON_EMPTY = ('base_frame', 'odom_frame')
 
 
 def descriptor(name: str, default: Any, description: str, dynamic: bool,

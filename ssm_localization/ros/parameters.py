@@ -16,7 +16,7 @@ from typing import Any
 
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
-from ssm_localization.config import IndexConfig, LocalizerConfig
+from ssm_localization.config import IndexConfig, LocalizerConfig, TrackerConfig
 from ssm_localization.config import params as ssm_params
 import yaml
 
@@ -140,12 +140,15 @@ def indexer_parameters() -> dict[str, tuple[Any, str]]:
 
 #: global_localizer parameters that may change in any lifecycle state (the others are read at
 #: configure and may change only while the node is unconfigured)
-DYNAMIC = ('scan_timeout', 'publish_initialpose', 'publish_markers', 'localize_on_start')
+DYNAMIC = ('scan_timeout', 'publish_initialpose', 'publish_markers', 'localize_on_start',
+           'publish_tf')
 
 NODE_PARAMS: dict[str, tuple[Any, str]] = {
     **AUTOSTART,
     'mode': ('on_demand', 'on_demand: localize on the relocalize service only; continuous: '
-                          'every scan (or at most rate Hz)'),
+                          'every scan (or at most rate Hz) on its own; track: track every scan '
+                          'with odometry (odom topic, or TF odom_frame <- base_frame), '
+                          'relocalize globally when lost'),
     'base_frame': ('base_link', 'robot base frame: global_pose is the pose of this frame'),
     'map_frame': ('', "frame_id of global_pose; empty = the map's frame_id"),
     'index_file': ('', 'load this index (npz) instead of indexing the map topic; if the file is '
@@ -159,6 +162,14 @@ NODE_PARAMS: dict[str, tuple[Any, str]] = {
     'localize_on_start': (False, 'once active, localize the incoming scans until the first ok '
                                  'pose, publish it (and on initialpose when publish_initialpose), '
                                  'then on demand'),
+    'odom_frame': ('odom', 'track mode: the odometry frame (TF odom_frame <- base_frame when the '
+                           'odom topic is silent; the child of the map -> odom transform)'),
+    'odom_max_age': (0.5, "track mode: odometry further than this from a scan's stamp (s) is "
+                          'not used; the scan is tracked without odometry'),
+    'publish_tf': (True, 'track mode: broadcast map -> odom (where tf2_ros exists), as AMCL '
+                         'does'),
+    'transform_tolerance': (1.0, 'track mode: map -> odom is stamped this many seconds after '
+                                 'its scan (AMCL transform_tolerance)'),
 }
 
 
@@ -166,7 +177,8 @@ def localizer_parameters() -> dict[str, tuple[Any, str]]:
     """Every global_localizer parameter: ``{name: (default, description)}``."""
     index_params = {k: v for k, v in indexer_parameters().items() if k.startswith('index.')}
     return {**NODE_PARAMS, **LASER_PARAMS, **MAP_PARAMS, **index_params,
-            **config_parameter_table('localizer', LocalizerConfig())}
+            **config_parameter_table('localizer', LocalizerConfig()),
+            **config_parameter_table('tracker', TrackerConfig())}
 
 
 PARAMS_FILE_HEADER = """\
@@ -221,7 +233,7 @@ def parameters_markdown() -> str:
              'current). `config/ssm_localization.yaml` lists the same parameters at their',
              'defaults. Dotted names are config fields: `index.*` is `IndexConfig`,',
              '`index.matcher.*` `MatcherConfig`, `index.topology.*` `TopologyConfig`,',
-             '`localizer.*` `LocalizerConfig`.',
+             '`localizer.*` `LocalizerConfig`, `tracker.*` `TrackerConfig` (mode `track`).',
              'All of them are read-only except the ones marked *dynamic*.']
     for node, table in node_tables().items():
         lines += ['', f'## {node}', '', '| parameter | default | description |', '|---|---|---|']
