@@ -7,7 +7,7 @@ OUT    := out
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
 
-.PHONY: venv demo test test-fast params-yaml bench bench-scanmatch bench-index bench-localize colcon-check clean
+.PHONY: venv demo test test-fast params-yaml bench bench-scanmatch bench-index bench-localize bench-track colcon-check clean
 
 $(STAMP): requirements.txt setup.py setup.cfg
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 10), "Python 3.10+ required"'
@@ -29,7 +29,7 @@ test: $(STAMP)
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -ra -m "not slow"
 
-bench: bench-scanmatch bench-index bench-localize
+bench: bench-scanmatch bench-index bench-localize bench-track
 
 bench-scanmatch: $(STAMP)
 	$(BIN)/ssm_localization bench scanmatch
@@ -39,6 +39,9 @@ bench-index: $(STAMP)
 
 bench-localize: $(STAMP)
 	$(BIN)/ssm_localization bench localize
+
+bench-track: $(STAMP)
+	$(BIN)/ssm_localization bench track
 
 colcon-check: $(STAMP)
 	rm -rf build/colcon install/colcon log/colcon

@@ -59,8 +59,8 @@ class TrackerConfig:
         0.25, 'a larger position std along the weakest direction after fusing the prediction: '
         'ambiguous, m')
     rival_margin: float = param(
-        0.02, 'a rival in the window, distinct along a direction the scan determines, scoring '
-        'within this of the best: ambiguous')
+        0.02, "a rival in the window, distinct (the localizer's distinct_xy / distinct_yaw, and "
+        'along a direction the scan determines), scoring within this of the best: ambiguous')
     rival_chi2: float = param(
         9.0, "squared Mahalanobis distance (in the two poses' summed scan covariances) beyond "
         'which two poses are distinct')

@@ -12,6 +12,7 @@ Rows are RESULTS.csv rows (``ResultRow``) with one more column, ``mode`` (tracke
 """
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 import math
 from typing import Sequence
@@ -102,7 +103,7 @@ class TrackSummary:
 
     def format(self, title: str = '') -> str:  # noqa: A003 - as Summary.format
         head = f'{title}: ' if title else ''
-        recov = ', '.join(_scans(r) for r in self.recoveries) or '-'
+        recov = _recoveries(self.recoveries)
         s = self.summary
         figures = (f'success {s.success_rate:.1%} precision {s.precision:.2%} | '
                    if s is not None else '')
@@ -118,6 +119,17 @@ class TrackSummary:
 
 def _scans(r: Recovery) -> str:
     return 'never' if r.scans is None else str(r.scans)
+
+
+def _recoveries(recoveries: list[Recovery]) -> str:
+    """List a few recoveries; count many of them by their number of scans."""
+    if not recoveries:
+        return '-'
+    if len(recoveries) <= 6:
+        return ', '.join(_scans(r) for r in recoveries)
+    counts = Counter(_scans(r) for r in recoveries)
+    return f'{len(recoveries)} (' + ', '.join(f'{k} scans: {v}' for k, v in sorted(
+        counts.items())) + ')'
 
 
 def recovery_after(rows: Sequence[TrackRow], start: int, use_truth: bool = True) -> Recovery:

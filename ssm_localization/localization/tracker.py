@@ -17,9 +17,10 @@ Per scan (``Tracker.track``):
    reported pose is one that was verified;
 5. decide: ``ok`` when the verified score is at least ``min_score`` with at most the
    localizer's ``max_contradicting`` of the beams through walls, the fused position std is at
-   most ``max_position_std`` and no rival in the window, distinct along a direction the scan
-   determines, scores within ``rival_margin`` and fits the prediction about as well
-   (``rival_prior_chi2``; among poses the scan cannot tell apart the prediction picks);
+   most ``max_position_std`` and no rival in the window, distinct (the localizer's
+   ``distinct_xy`` / ``distinct_yaw``, and along a direction the scan determines), scores within
+   ``rival_margin`` and fits the prediction about as well (``rival_prior_chi2``; among poses the
+   scan cannot tell apart the prediction picks);
    ``ambiguous`` for the last two (the track goes on);
 6. cross-check a doubtful ``ok``: a score under ``check_score`` and ``check_drop`` below the
    median of the last ones (the fit a scan gets in a look-alike corridor after a kidnap), or a
@@ -260,8 +261,10 @@ class Tracker:
         if not self._plausible(fused):
             fused, pose, cov = best, best.pose, best.covariance     # the scan's own pose
         common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated}
+        lc = loc.config
         rivals = [h for h in contenders if h is not best
                   and prior[id(h)] <= prior[id(best)] + cfg.rival_prior_chi2
+                  and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)
                   and mahalanobis2(h.pose, best.pose, h.covariance + best.covariance)
                   > cfg.rival_chi2]
         if rivals:
