@@ -19,8 +19,8 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from ssm_localization import read_bag
-from ssm_localization.ros.conversions import (covariance6, occupancy_grid_from_map, pose_from_msg,
-                                              pose_msg, stamp_to_sec, time_msg)
+from ssm_localization.ros.conversions import (covariance6, pose_from_msg, pose_msg, stamp_to_sec,
+                                              time_msg)
 from ssm_localization.ros.lifecycle import state_label
 from ssm_localization.ros.odometry import (map_to_odom, MapOdomBroadcaster, OdometryBuffer,
                                            OdometrySource, transform_pose)
