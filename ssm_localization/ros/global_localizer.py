@@ -33,7 +33,7 @@ import math
 from pathlib import Path
 import threading
 import time
-from typing import Any
+from typing import Any, Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
@@ -559,8 +559,13 @@ class GlobalLocalizerNode(LifecycleNode):
             if reason and loc is not None:
                 self.get_logger().info(f'no pose: {reason}', throttle_duration_sec=2.0)
 
-    def _track_loop(self) -> None:
-        """Track mode: track the newest scan, again and again."""
+    def _ready_scans(self, waiting: str) -> Iterator[LaserScan]:
+        """
+        Yield the newest scan, again and again, whenever the node can localize it.
+
+        Until the node stops; while it cannot localize, ``waiting`` (with ``{reason}``) is
+        logged now and then.
+        """
         done = self._mailbox.seq
         while not self._stop.is_set():
             got = self._mailbox.wait_newer(done, None, self._stop)
@@ -569,25 +574,20 @@ class GlobalLocalizerNode(LifecycleNode):
             msg, done = got
             reason = self._not_ready()
             if reason:
-                self.get_logger().info(f'not tracking: {reason}', throttle_duration_sec=5.0)
+                self.get_logger().info(waiting.format(reason=reason), throttle_duration_sec=5.0)
                 continue
+            yield msg
+
+    def _track_loop(self) -> None:
+        """Track mode: track the newest scan, again and again."""
+        for msg in self._ready_scans('not tracking: {reason}'):
             self.track_msg(msg)
 
     def _startup_loop(self) -> None:
         """``localize_on_start``: localize incoming scans until the first ``ok`` pose."""
         self.get_logger().info('localize_on_start: localizing incoming scans until the first '
                                'ok pose')
-        done = self._mailbox.seq
-        while not self._stop.is_set():
-            got = self._mailbox.wait_newer(done, None, self._stop)
-            if got is None:
-                continue
-            msg, done = got
-            reason = self._not_ready()
-            if reason:
-                self.get_logger().info(f'localize_on_start: waiting ({reason})',
-                                       throttle_duration_sec=5.0)
-                continue
+        for msg in self._ready_scans('localize_on_start: waiting ({reason})'):
             loc, reason = self.localize_msg(msg, verbose=False)
             if reason is None:
                 self.get_logger().info(f'localize_on_start: localized, {format_result(loc)}; '
