@@ -198,14 +198,31 @@ def fresh_domain() -> int:
     return domain
 
 
-@pytest.fixture
-def ros(ros_domain):
+def _harness(num_threads: int | None = None):
     fresh_domain()
-    harness = RosHarness()
+    harness = RosHarness() if num_threads is None else RosHarness(num_threads=num_threads)
     try:
         yield harness
     finally:
         harness.close()
+
+
+@pytest.fixture
+def ros(ros_domain):
+    yield from _harness()
+
+
+@pytest.fixture
+def ros_node_threads(ros_domain):
+    """Return the harness with as many executor threads as the nodes' own main() uses."""
+    from ssm_localization.ros.global_localizer import EXECUTOR_THREADS
+    yield from _harness(EXECUTOR_THREADS)
+
+
+def ros_params(**kw) -> list:
+    """Return ``rclpy`` parameter overrides from keyword arguments."""
+    from rclpy.parameter import Parameter
+    return [Parameter(k, value=v) for k, v in kw.items()]
 
 
 def synthetic_map(variant: int = 0):

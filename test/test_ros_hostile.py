@@ -11,7 +11,7 @@ import math
 import subprocess
 import time
 
-from conftest import fresh_domain, RosHarness, synthetic_map, venv_bin
+from conftest import ros_params, synthetic_map, venv_bin
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
 import pytest
@@ -19,15 +19,13 @@ from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.exceptions import ParameterException
-from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import LaserScan
 from ssm_localization.io.simulate import simulate, SimulationConfig
 from ssm_localization.mapping.index import build_index, save_index
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_from_msg)
-from ssm_localization.ros.global_localizer import (EXECUTOR_THREADS, GlobalLocalizerNode,
-                                                   MAX_QUEUED_CALLS)
+from ssm_localization.ros.global_localizer import GlobalLocalizerNode, MAX_QUEUED_CALLS
 from ssm_localization.ros.qos import LATCHED_QOS
 from ssm_localization.transforms import wrap_angle
 from std_srvs.srv import Trigger
@@ -36,18 +34,9 @@ pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
-def ros(ros_domain):
+def ros(ros_node_threads):
     """Return the harness with as many executor threads as the node's own main() uses."""
-    fresh_domain()
-    harness = RosHarness(num_threads=EXECUTOR_THREADS)
-    try:
-        yield harness
-    finally:
-        harness.close()
-
-
-def _params(**kw) -> list[Parameter]:
-    return [Parameter(k, value=v) for k, v in kw.items()]
+    return ros_node_threads
 
 
 def _close(pose, truth) -> bool:
@@ -66,7 +55,7 @@ class Rig:
         params.setdefault('localizer.surface_depth', 0.0)
         self.ros = ros
         self.node = ros.add(GlobalLocalizerNode(context=ros.context,
-                                                parameter_overrides=_params(**params)))
+                                                parameter_overrides=ros_params(**params)))
         self.map_pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
         self.scan_pub = ros.node.create_publisher(LaserScan, 'scan', qos_profile_sensor_data)
         self.client = ros.node.create_client(Trigger, 'relocalize')
@@ -126,7 +115,7 @@ BAD_AT_START = [
 @pytest.mark.parametrize('name, value, reason', BAD_AT_START)
 def test_bad_parameter_at_start_is_refused_with_its_reason(ros, name, value, reason):
     with pytest.raises((ParameterException, ValueError)) as info:
-        GlobalLocalizerNode(context=ros.context, parameter_overrides=_params(**{name: value}))
+        GlobalLocalizerNode(context=ros.context, parameter_overrides=ros_params(**{name: value}))
     assert reason in str(info.value) and name.split('.')[-1] in str(info.value)
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 
-from conftest import find_bag, fresh_domain, REPO, RosHarness, synthetic_map
+from conftest import find_bag, REPO, ros_params, synthetic_map
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from lifecycle_msgs.msg import Transition
@@ -21,13 +21,12 @@ import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from ssm_localization.io.bag_reader import read_bag
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_from_msg)
-from ssm_localization.ros.global_localizer import EXECUTOR_THREADS, GlobalLocalizerNode
+from ssm_localization.ros.global_localizer import GlobalLocalizerNode
 from ssm_localization.ros.map_indexer import MapIndexerNode
 from ssm_localization.ros.qos import LATCHED_QOS
 from ssm_localization.transforms import wrap_angle
@@ -39,18 +38,9 @@ pytestmark = pytest.mark.ros
 
 
 @pytest.fixture
-def ros(ros_domain):
+def ros(ros_node_threads):
     """Return the harness with as many executor threads as the node's own main() uses."""
-    fresh_domain()
-    harness = RosHarness(num_threads=EXECUTOR_THREADS)
-    try:
-        yield harness
-    finally:
-        harness.close()
-
-
-def _params(**kw) -> list[Parameter]:
-    return [Parameter(k, value=v) for k, v in kw.items()]
+    return ros_node_threads
 
 
 def _close(pose, truth, pos=0.2, yaw=0.05) -> bool:
@@ -101,7 +91,7 @@ class Rig:
         params.setdefault('localizer.surface_depth', 0.0)      # simulated bag
         self.ros = ros
         self.node = ros.add(GlobalLocalizerNode(context=ros.context,
-                                                parameter_overrides=_params(**params)))
+                                                parameter_overrides=ros_params(**params)))
         self.lifecycle = Lifecycle(ros, 'global_localizer')
         self.map_pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
         self.scan_pub = ros.node.create_publisher(LaserScan, 'scan', qos_profile_sensor_data)
@@ -283,7 +273,7 @@ def test_autostart_and_localize_on_start_hand_over_on_initialpose(ros, bag):
 
 
 def test_map_indexer_lifecycle(ros):
-    node = ros.add(MapIndexerNode(context=ros.context, parameter_overrides=_params(
+    node = ros.add(MapIndexerNode(context=ros.context, parameter_overrides=ros_params(
         autostart=False)))
     lc = Lifecycle(ros, 'map_indexer')
     got = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
