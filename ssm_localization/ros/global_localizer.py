@@ -29,6 +29,7 @@ AMCL does. The services' answers become the tracker's prior.
 from __future__ import annotations
 
 from concurrent.futures import TimeoutError as FutureTimeout
+from functools import partial
 import math
 from pathlib import Path
 import threading
@@ -53,9 +54,9 @@ from ssm_localization.ros.executor import spin
 from ssm_localization.ros.index_builder import IndexBuilder
 from ssm_localization.ros.index_source import IndexSource, ServedIndex
 from ssm_localization.ros.laser_pose import LaserMount, LaserPoseSource
-from ssm_localization.ros.lifecycle import (answer_invalid_transitions, FAILURE,
-                                            schedule_autostart, state_id, state_label, SUCCESS,
-                                            transition, UNCONFIGURED)
+from ssm_localization.ros.lifecycle import (answer_invalid_transitions, configured_state,
+                                            FAILURE, schedule_autostart, state_label, SUCCESS,
+                                            transition)
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.odometry import MapOdomBroadcaster, OdometryBuffer, OdometrySource
 from ssm_localization.ros.parameter_guard import ParameterGuard
@@ -104,7 +105,7 @@ class GlobalLocalizerNode(LifecycleNode):
         super().__init__('global_localizer', **kwargs)
         answer_invalid_transitions(self)
         self._guard = ParameterGuard(self, localizer_parameters(), DYNAMIC, {'mode': MODES},
-                                     self._configured_state, check_configs)
+                                     partial(configured_state, self), check_configs)
         values = self._guard.declare()
         self._group = ReentrantCallbackGroup()
         self._mailbox = ScanMailbox()
@@ -135,10 +136,6 @@ class GlobalLocalizerNode(LifecycleNode):
                                    '(lifecycle manager or ros2 lifecycle set)')
 
     # ------------------------------------------------------------------ lifecycle
-    def _configured_state(self) -> str | None:
-        """Return the state label while configure-time parameters are in use, else None."""
-        return None if state_id(self) == UNCONFIGURED else state_label(self)
-
     @transition('configure')
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         if self._destroying:

@@ -57,6 +57,11 @@ def state_label(node: LifecycleNode) -> str:
     return str(node._state_machine.current_state[1])
 
 
+def configured_state(node: LifecycleNode) -> str | None:
+    """Return the state label while configure-time parameters are in use, else None."""
+    return None if state_id(node) == UNCONFIGURED else state_label(node)
+
+
 def schedule_autostart(node: LifecycleNode, delay_sec: float = 0.0) -> None:
     """
     Configure, then activate, ``node`` once its executor spins (parameter ``autostart``).

@@ -10,6 +10,7 @@ the node configures and activates itself.
 """
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 import threading
 from typing import Any
@@ -22,9 +23,8 @@ from ssm_localization.mapping.index import build_index, save_index
 from ssm_localization.ros import markers
 from ssm_localization.ros.executor import spin
 from ssm_localization.ros.index_builder import IndexBuilder
-from ssm_localization.ros.lifecycle import (answer_invalid_transitions, FAILURE,
-                                            schedule_autostart, state_id, state_label, SUCCESS,
-                                            transition, UNCONFIGURED)
+from ssm_localization.ros.lifecycle import (answer_invalid_transitions, configured_state,
+                                            FAILURE, schedule_autostart, SUCCESS, transition)
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.parameter_guard import ParameterGuard
 from ssm_localization.ros.parameters import build_config, indexer_parameters, laser_pose_of
@@ -47,7 +47,8 @@ class MapIndexerNode(LifecycleNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('map_indexer', **kwargs)
         answer_invalid_transitions(self)
-        self._guard = ParameterGuard(self, indexer_parameters(), (), {}, self._configured_state,
+        self._guard = ParameterGuard(self, indexer_parameters(), (), {},
+                                     partial(configured_state, self),
                                      check_index_config)
         values = self._guard.declare()
         self._group = ReentrantCallbackGroup()
@@ -61,9 +62,6 @@ class MapIndexerNode(LifecycleNode):
             schedule_autostart(self)
         else:
             self.get_logger().info('autostart is false: waiting for configure / activate')
-
-    def _configured_state(self) -> str | None:
-        return None if state_id(self) == UNCONFIGURED else state_label(self)
 
     @transition('configure')
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
