@@ -25,6 +25,10 @@ from ..transforms import apply
 
 #: the tree proposes this many times the wanted neighbours; exact distances pick among them
 RERANK = 3
+#: the tree's proposals may be up to (1 + TREE_EPS) times further than the true ones (scipy's
+#: ``eps``): half the tree search, and after the exact re-ranking the same neighbours in
+#: practice (no answer changed on 500 real and simulated queries; ``bench localize``)
+TREE_EPS = 0.5
 
 #: the 27 bin offsets of a 3 x 3 x 3 neighbourhood
 _OFFSETS = np.array([(dx, dy, da) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for da in (-1, 0, 1)])
@@ -137,7 +141,7 @@ class PoseVoting:
         if self._tree is not None:
             # candidates from the tree, re-ranked by their exact descriptor distance
             kk = min(RERANK * k, n_m)
-            _, cand = self._tree.query((q_desc - self._mean) @ self._axes, k=kk)
+            _, cand = self._tree.query((q_desc - self._mean) @ self._axes, k=kk, eps=TREE_EPS)
             cand = np.asarray(cand).reshape(n_q, kk)
             diff = self.descriptors[cand] - q_desc[:, None, :]
             d2 = np.einsum('qkd,qkd->qk', diff, diff)
