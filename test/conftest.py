@@ -10,6 +10,7 @@ skip a test when they are missing, except under CI (``CI=true``), where that is 
 """
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 import random
@@ -223,6 +224,54 @@ def ros_params(**kw) -> list:
     """Return ``rclpy`` parameter overrides from keyword arguments."""
     from rclpy.parameter import Parameter
     return [Parameter(k, value=v) for k, v in kw.items()]
+
+
+class LocalizerRig:
+    """A GlobalLocalizerNode with ``map`` and ``scan`` publishers, a client, ``global_pose``."""
+
+    def __init__(self, ros, **params) -> None:
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from nav_msgs.msg import OccupancyGrid
+        from rclpy.qos import qos_profile_sensor_data
+        from sensor_msgs.msg import LaserScan
+        from ssm_localization.ros.global_localizer import GlobalLocalizerNode
+        from ssm_localization.ros.qos import LATCHED_QOS
+        from std_srvs.srv import Trigger
+        params.setdefault('scan_timeout', 3.0)
+        self.ros = ros
+        self.node = ros.add(GlobalLocalizerNode(context=ros.context,
+                                                parameter_overrides=ros_params(**params)))
+        self.map_pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
+        self.scan_pub = ros.node.create_publisher(LaserScan, 'scan', qos_profile_sensor_data)
+        self.client = ros.node.create_client(Trigger, 'relocalize')
+        self.poses = ros.collect(PoseWithCovarianceStamped, 'global_pose', LATCHED_QOS)
+        self.n_poses_before = 0
+
+    def wait_ready(self, timeout: float = 120.0) -> bool:
+        """Wait until the node serves an index of the newest map."""
+        return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout,
+                                      0.05))
+
+    def call_relocalize(self, scan=None, timeout: float = 30.0):
+        """Call relocalize; publish ``scan`` every 50 ms until the answer arrives."""
+        from std_srvs.srv import Trigger
+        self.n_poses_before = len(self.poses)
+        assert self.client.wait_for_service(timeout_sec=10.0)
+        future = self.client.call_async(Trigger.Request())
+        end = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < end:
+            if scan is not None:
+                self.scan_pub.publish(scan)
+            time.sleep(0.05)
+        assert future.done(), 'relocalize did not answer'
+        return future.result()
+
+
+def close_pose(pose, truth, pos_tol: float = 0.15, yaw_tol: float = 0.05) -> bool:
+    """Tell whether ``pose`` is within ``pos_tol`` metres and ``yaw_tol`` rad of ``truth``."""
+    from ssm_localization.transforms import wrap_angle
+    return (math.hypot(pose[0] - truth[0], pose[1] - truth[1]) < pos_tol
+            and abs(float(wrap_angle(pose[2] - truth[2]))) < yaw_tol)
 
 
 def synthetic_map(variant: int = 0):

@@ -11,23 +11,20 @@ import math
 import subprocess
 import time
 
-from conftest import ros_params, synthetic_map, venv_bin
-from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
-from nav_msgs.msg import OccupancyGrid
+from conftest import close_pose, LocalizerRig, ros_params, synthetic_map, venv_bin
+from geometry_msgs.msg import PoseArray
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.exceptions import ParameterException
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
-from sensor_msgs.msg import LaserScan
+from rclpy.qos import QoSProfile
 from ssm_localization.io.simulate import simulate, SimulationConfig
 from ssm_localization.mapping.index import build_index, save_index
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_from_msg)
 from ssm_localization.ros.global_localizer import GlobalLocalizerNode, MAX_QUEUED_CALLS
 from ssm_localization.ros.qos import LATCHED_QOS
-from ssm_localization.transforms import wrap_angle
 from std_srvs.srv import Trigger
 
 pytestmark = pytest.mark.ros
@@ -39,46 +36,29 @@ def ros(ros_node_threads):
     return ros_node_threads
 
 
-def _close(pose, truth) -> bool:
-    return (math.hypot(pose[0] - truth[0], pose[1] - truth[1]) < 0.15
-            and abs(float(wrap_angle(pose[2] - truth[2]))) < 0.05)
-
-
 def _sim(occ, count=3, seed=3):
     return simulate(occ, SimulationConfig(count=count, seed=seed, clearance=0.4,
                                           noise_sigma=0.005, stamp0=100.0))
 
 
-class Rig:
+class Rig(LocalizerRig):
+    """The localizer rig with a set_parameters client and the candidates stream."""
+
     def __init__(self, ros, **params) -> None:
-        params.setdefault('scan_timeout', 3.0)
         params.setdefault('localizer.surface_depth', 0.0)
-        self.ros = ros
-        self.node = ros.add(GlobalLocalizerNode(context=ros.context,
-                                                parameter_overrides=ros_params(**params)))
-        self.map_pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
-        self.scan_pub = ros.node.create_publisher(LaserScan, 'scan', qos_profile_sensor_data)
-        self.client = ros.node.create_client(Trigger, 'relocalize')
+        super().__init__(ros, **params)
         self.setter = ros.node.create_client(SetParameters, 'global_localizer/set_parameters')
-        self.poses = ros.collect(PoseWithCovarianceStamped, 'global_pose', LATCHED_QOS)
         self.candidates = ros.collect(PoseArray, 'candidates', LATCHED_QOS)
 
     def ready(self, timeout=120.0) -> bool:
-        return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout))
+        return self.wait_ready(timeout)
 
     def relocalize(self, scan=None, timeout=30.0):
-        assert self.client.wait_for_service(timeout_sec=10.0)
-        n = len(self.poses)
-        future = self.client.call_async(Trigger.Request())
-        end = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < end:
-            if scan is not None:
-                self.scan_pub.publish(scan)
-            time.sleep(0.05)
-        assert future.done(), 'relocalize did not answer'
-        if future.result().success:
-            assert self.ros.wait_for(lambda: len(self.poses) > n, 5)
-        return future.result()
+        """Call relocalize; on success wait for the pose on global_pose too."""
+        result = self.call_relocalize(scan, timeout)
+        if result.success:
+            assert self.ros.wait_for(lambda: len(self.poses) > self.n_poses_before, 5)
+        return result
 
     def set_remote(self, name: str, value):
         """ros2 param set over DDS (the set_parameters service)."""
@@ -150,7 +130,7 @@ def test_bad_parameters_at_run_time_are_refused_and_the_node_keeps_serving(ros):
     assert rig.set_remote('scan_timeout', 2.5).successful
     res = rig.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message
-    assert _close(pose_from_msg(rig.poses[-1].pose.pose), sim.poses[0])
+    assert close_pose(pose_from_msg(rig.poses[-1].pose.pose), sim.poses[0])
 
 
 # ---------------------------------------------------------------------------- item 2
@@ -225,7 +205,7 @@ def test_corrupt_index_file_falls_back_to_the_map_topic(ros, tmp_path, capfd):
     assert 'cannot use index file' in err and 'falling back to the map on /map' in err
     res = rig.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message
-    assert _close(pose_from_msg(rig.poses[-1].pose.pose), sim.poses[0])
+    assert close_pose(pose_from_msg(rig.poses[-1].pose.pose), sim.poses[0])
     assert ros.wait_for(lambda: bad.read_bytes()[:2] == b'PK' and b'definitely' not in
                         bad.read_bytes(), 10), 'the corrupt file is rewritten'
 
@@ -243,7 +223,7 @@ def test_index_of_another_map_is_not_used_silently(ros, tmp_path, capfd):
     assert 'was built for another map' in err or 'is not the map' in err
     res = rig.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message
-    assert _close(pose_from_msg(rig.poses[-1].pose.pose), sim.poses[0])
+    assert close_pose(pose_from_msg(rig.poses[-1].pose.pose), sim.poses[0])
 
 
 def test_frame_change_and_map_swap(ros):
@@ -281,5 +261,5 @@ def test_frame_change_and_map_swap(ros):
     assert rig.ros.wait_for(lambda: rig.node.source.served.checksum == swapped.checksum(), 60)
     res = rig.relocalize(laser_scan_from_record(sim2.scans[0]))
     assert res.success, res.message
-    assert _close(pose_from_msg(rig.poses[-1].pose.pose), sim2.poses[0])
+    assert close_pose(pose_from_msg(rig.poses[-1].pose.pose), sim2.poses[0])
     assert rig.poses[-1].header.frame_id == 'map'

@@ -4,30 +4,22 @@ from __future__ import annotations
 import math
 import time
 
-from conftest import find_bag, synthetic_map
+from conftest import close_pose, find_bag, LocalizerRig, ros_params, synthetic_map
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
 import pytest
-from rclpy.parameter import Parameter
-from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_from_msg, stamp_to_sec)
 from ssm_localization.ros.lifecycle import state_label
 from ssm_localization.ros.qos import LATCHED_QOS
-from ssm_localization.transforms import wrap_angle
-from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 pytestmark = pytest.mark.ros
 
 POS_TOL = 0.15      # m
 YAW_TOL = 0.05      # rad
-
-
-def _params(**kw) -> list[Parameter]:
-    return [Parameter(k, value=v) for k, v in kw.items()]
 
 
 def _has_nodes(arr: MarkerArray) -> bool:
@@ -41,23 +33,14 @@ def _simulated(occ, count: int = 6, seed: int = 3):
 
 
 def _close(pose, truth) -> bool:
-    return (math.hypot(pose[0] - truth[0], pose[1] - truth[1]) < POS_TOL
-            and abs(float(wrap_angle(pose[2] - truth[2]))) < YAW_TOL)
+    return close_pose(pose, truth, POS_TOL, YAW_TOL)
 
 
-class Localizer:
-    """A GlobalLocalizerNode in the harness with a map publisher, scan publisher and client."""
+class Localizer(LocalizerRig):
+    """The localizer rig with the topological_map stream, autostarted."""
 
     def __init__(self, ros, **params) -> None:
-        from ssm_localization.ros.global_localizer import GlobalLocalizerNode
-        params.setdefault('scan_timeout', 3.0)
-        self.ros = ros
-        self.node = ros.add(GlobalLocalizerNode(context=ros.context,
-                                                parameter_overrides=_params(**params)))
-        self.map_pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
-        self.scan_pub = ros.node.create_publisher(LaserScan, 'scan', qos_profile_sensor_data)
-        self.client = ros.node.create_client(Trigger, 'relocalize')
-        self.poses = ros.collect(PoseWithCovarianceStamped, 'global_pose', LATCHED_QOS)
+        super().__init__(ros, **params)
         self.markers = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
         assert ros.wait_for(lambda: state_label(self.node) == 'active', 10), 'not autostarted'
 
@@ -74,22 +57,9 @@ class Localizer:
             else occupancy_grid_from_map(occ_or_grid)
         self.map_pub.publish(grid)
 
-    def wait_ready(self, timeout: float = 120.0) -> bool:
-        return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout,
-                                      0.05))
-
     def relocalize(self, scan: LaserScan | None, timeout: float = 30.0):
         """Call relocalize; publish ``scan`` every 50 ms until the answer arrives."""
-        self.n_poses_before = len(self.poses)
-        assert self.client.wait_for_service(timeout_sec=10.0)
-        future = self.client.call_async(Trigger.Request())
-        end = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < end:
-            if scan is not None:
-                self.scan_pub.publish(scan)
-            time.sleep(0.05)
-        assert future.done(), 'relocalize did not answer'
-        return future.result()
+        return self.call_relocalize(scan, timeout)
 
     def new_pose(self, timeout: float = 5.0):
         """
@@ -110,7 +80,7 @@ def test_map_indexer_markers_index_file_and_newest_map_wins(ros, tmp_path):
     from ssm_localization.ros.map_indexer import MapIndexerNode
     index_file = tmp_path / 'sub' / 'index.npz'
     node = ros.add(MapIndexerNode(context=ros.context,
-                                  parameter_overrides=_params(index_file=str(index_file))))
+                                  parameter_overrides=ros_params(index_file=str(index_file))))
     got = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
     pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
     first = synthetic_map(0)
