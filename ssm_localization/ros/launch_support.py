@@ -14,6 +14,7 @@ from pathlib import Path
 import tempfile
 from typing import Any
 
+from ssm_localization.config.params import load_yaml_mapping
 import yaml
 
 _TRUE = ('true', '1', 'yes', 'on')
@@ -37,27 +38,6 @@ def launch_bool(text: str, name: str) -> bool:
 def namespace_tokens(namespace: str) -> list[str]:
     """``'/robot1/arm/'`` -> ``['robot1', 'arm']``; ``''`` or ``'/'`` -> ``[]``."""
     return [token for token in str(namespace).split('/') if token]
-
-
-def load_params_mapping(path: str | os.PathLike) -> dict[str, Any]:
-    """
-    Return the top-level mapping of a ROS 2 params file.
-
-    ``ValueError`` naming the file otherwise.
-    """
-    file = Path(path).expanduser()
-    if not file.is_file():
-        raise ValueError(f'params file not found: {file}')
-    try:
-        data = yaml.safe_load(file.read_text())
-    except yaml.YAMLError as exc:
-        raise ValueError(f'params file {file} is not valid YAML: {exc}') from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise ValueError(f'params file {file}: expected a mapping of node names, '
-                         f'got {type(data).__name__}')
-    return data
 
 
 def nest_under_namespace(data: dict[str, Any], namespace: str) -> dict[str, Any]:
@@ -85,7 +65,10 @@ def namespaced_params_file(path: str | os.PathLike, namespace: str) -> str:
     Returns ``path`` itself when ``namespace`` is empty, else the path of a new temporary file
     holding :func:`nest_under_namespace` of its content (left for the launched process to read).
     """
-    data = load_params_mapping(path)
+    try:
+        data = load_yaml_mapping(Path(path).expanduser())
+    except FileNotFoundError as exc:        # a launch argument error, like the others here
+        raise ValueError(str(exc)) from None
     if not namespace_tokens(namespace):
         return str(Path(path).expanduser())
     fd, out = tempfile.mkstemp(prefix='ssm_localization_params_', suffix='.yaml')
