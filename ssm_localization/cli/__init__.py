@@ -28,7 +28,7 @@ COMMANDS = {
     'match': (match_cmd, 'match two scans of a CARMEN log and plot the result'),
     'convert-carmen': (carmen_cmd, 'convert a CARMEN log into a map (YAML+PGM) and mcap bags'),
     'simulate': (simulate_cmd, 'generate a simulated query bag on a map'),
-    'bench': (bench_cmd, 'benchmarks: scanmatch, index, localize'),
+    'bench': (bench_cmd, 'benchmarks: scanmatch, index, localize, track, soak'),
 }
 
 
