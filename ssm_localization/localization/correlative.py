@@ -39,15 +39,12 @@ class CorrelativeResult:
     Leaves of one search, best first.
 
     ``poses`` (L, 3) map-frame sensor poses, ``scores`` (L,) their mean likelihood in [0, 1];
-    ``evaluated`` candidates scored at all levels; ``complete`` is False when the time budget
-    stopped the search early.
+    ``complete`` is False when the time budget stopped the search early.
     """
 
     poses: np.ndarray
     scores: np.ndarray
-    evaluated: int
     complete: bool
-    elapsed_ms: float
 
     @property
     def best_pose(self) -> tuple[float, float, float] | None:
@@ -101,13 +98,9 @@ class CorrelativeGrid:
         for k in range(1, self.depth + 1):
             s = 1 << (k - 1)
             grid = _window_max(grid, s)
-            anyfree = _window_any(anyfree, s)
+            anyfree = _window_max(anyfree, s)
             self._levels.append(grid.ravel())
             self._free.append(anyfree)
-
-    @property
-    def nbytes(self) -> int:
-        return sum(g.nbytes for g in self._levels) + sum(f.nbytes for f in self._free)
 
     # ------------------------------------------------------------------ geometry
     def _grid_yaws(self, yaws) -> np.ndarray:
@@ -156,12 +149,12 @@ class CorrelativeGrid:
             yaws = self.origin[2] + 2.0 * math.pi * np.arange(n) / n
         thetas = self._grid_yaws(yaws)
         if len(pts) == 0 or len(thetas) == 0:
-            return _empty(0, t0)
+            return _empty()
         base = self._offsets(pts, thetas)
         norm = 1.0 / (_SCALE * len(pts))
         r0, r1, c0, c1 = self._window_cells(window)
         if r0 >= r1 or c0 >= c1:
-            return _empty(0, t0)
+            return _empty()
         top = 1 << self.depth
         rr, cc = np.meshgrid(np.arange(r0 - r0 % top, r1, top), np.arange(c0 - c0 % top, c1, top),
                              indexing='ij')
@@ -173,7 +166,6 @@ class CorrelativeGrid:
         r = np.tile(rr, n_k)
         c = np.tile(cc, n_k)
         ub = self._score(self.depth, base, k, r, c, norm)
-        evaluated = len(k)
         lev = np.full(len(k), self.depth, np.int8)
         best = -1.0
         leaves: list[np.ndarray] = []
@@ -206,7 +198,6 @@ class CorrelativeGrid:
                 inside[inside] = self._any_free(int(level) - 1, cr[inside], cc_[inside])
                 ck, cr, cc_ = ck[inside], cr[inside], cc_[inside]
                 sc = self._score(int(level) - 1, base, ck, cr, cc_, norm)
-                evaluated += len(ck)
                 if level == 1:
                     good = sc >= max(min_score, ratio * best)
                     if good.any():
@@ -216,7 +207,7 @@ class CorrelativeGrid:
                     new.append((ck, cr, cc_, np.full(len(ck), level - 1, np.int8), sc))
             k, r, c, lev, ub = (np.concatenate(a) for a in zip(*new))
         if not leaves:
-            return _empty(evaluated, t0, complete)
+            return _empty(complete)
         lv = np.concatenate(leaves)
         lv = lv[lv[:, 3] >= max(min_score, ratio * best)]
         lv = lv[np.argsort(-lv[:, 3], kind='stable')][:max_leaves]
@@ -226,8 +217,7 @@ class CorrelativeGrid:
             inside = ((poses[:, 0] >= x0) & (poses[:, 0] <= x1) & (poses[:, 1] >= y0)
                       & (poses[:, 1] <= y1))
             poses, lv = poses[inside], lv[inside]
-        return CorrelativeResult(poses=poses, scores=lv[:, 3], evaluated=evaluated,
-                                 complete=complete, elapsed_ms=(time.perf_counter() - t0) * 1e3)
+        return CorrelativeResult(poses=poses, scores=lv[:, 3], complete=complete)
 
     def score_poses(self, points: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """Mean likelihood (level 0) of ``points`` (sensor frame) at each map-frame pose (P, 3)."""
@@ -294,7 +284,11 @@ def _block_reduce(a: np.ndarray, f: int, op) -> np.ndarray:
 
 
 def _window_max(grid: np.ndarray, s: int) -> np.ndarray:
-    """``out[r, c] = max(grid[r:r+2s, c:c+2s])`` given ``grid`` holds the s x s window maxima."""
+    """
+    ``out[r, c] = max(grid[r:r+2s, c:c+2s])`` given ``grid`` holds the s x s window maxima.
+
+    On a boolean grid the maximum is ``any``.
+    """
     out = grid.copy()
     np.maximum(out[:-s], grid[s:], out=out[:-s])
     out2 = out.copy()
@@ -302,14 +296,5 @@ def _window_max(grid: np.ndarray, s: int) -> np.ndarray:
     return out2
 
 
-def _window_any(mask: np.ndarray, s: int) -> np.ndarray:
-    out = mask.copy()
-    out[:-s] |= mask[s:]
-    out2 = out.copy()
-    out2[:, :-s] |= out[:, s:]
-    return out2
-
-
-def _empty(evaluated: int, t0: float, complete: bool = True) -> CorrelativeResult:
-    return CorrelativeResult(poses=np.zeros((0, 3)), scores=np.zeros(0), evaluated=evaluated,
-                             complete=complete, elapsed_ms=(time.perf_counter() - t0) * 1e3)
+def _empty(complete: bool = True) -> CorrelativeResult:
+    return CorrelativeResult(poses=np.zeros((0, 3)), scores=np.zeros(0), complete=complete)

@@ -53,8 +53,6 @@ from ..matching.spectral import binarize, leading_eigenvector, matching_score
 from ..transforms import apply, compose, inverse, Pose2, wrap_angle
 
 STATUSES = ('ok', 'ambiguous', 'failed')
-#: where a hypothesis came from
-SOURCES = ('spectral', 'search', 'prior', 'paper')
 
 
 @dataclass
@@ -139,10 +137,6 @@ def distinct(a: Pose2, b: Pose2, xy: float, yaw: float) -> bool:
     return math.hypot(a[0] - b[0], a[1] - b[1]) > xy or abs(wrap_angle(a[2] - b[2])) > yaw
 
 
-def _same(a: Pose2, b: Pose2) -> bool:
-    return math.hypot(a[0] - b[0], a[1] - b[1]) < 0.05 and abs(wrap_angle(a[2] - b[2])) < 0.02
-
-
 def _merged(ranked: list[Hypothesis], pose_of) -> list[Hypothesis]:
     """
     ``ranked`` without duplicates (the same pose within 5 cm and 0.02 rad).
@@ -151,7 +145,7 @@ def _merged(ranked: list[Hypothesis], pose_of) -> list[Hypothesis]:
     """
     out: list[Hypothesis] = []
     for h in ranked:
-        twin = next((o for o in out if _same(pose_of(h), pose_of(o))), None)
+        twin = next((o for o in out if not distinct(pose_of(h), pose_of(o), 0.05, 0.02)), None)
         if twin is None:
             out.append(h)
         else:
@@ -388,8 +382,7 @@ class GlobalLocalizer:
                 break
         feats = query.features
         scan_angles = np.arctan2(feats.tangents[:, 1], feats.tangents[:, 0])
-        for yaw in alignment_yaws(self._map_directions, scan_angles, None,
-                                  cfg.search_alignments):
+        for yaw in alignment_yaws(self._map_directions, scan_angles, cfg.search_alignments):
             if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * cfg.search_step for c in centres):
                 centres.append(float(yaw))
         if not centres:

@@ -44,12 +44,11 @@ import numpy as np
 
 from .fusion import fuse_weak, mahalanobis2
 from .localizer import (distinct, GlobalLocalizer, Hypothesis, Localization, position_std,
-                        Query)
+                        Query, STATUSES)
 from .motion import check_pose, Increment, predict
 from ..config.tracking import TrackerConfig
 from ..transforms import apply, Pose2, wrap_angle
 
-STATUSES = ('ok', 'ambiguous', 'failed')
 #: where a result's pose came from: the track, global localization, or nowhere verified
 MODES = ('tracked', 'relocalized', 'lost')
 #: covariance of a prior given without one: 0.5 m, 15 deg

@@ -100,7 +100,6 @@ class PoseVoting:
         self.angles = angles[keep]
         self.descriptors = np.concatenate(desc)[keep]
         self.nodes = np.concatenate(node)[keep]
-        self._desc_sq = (self.descriptors.astype(np.float32) ** 2).sum(axis=1)
         # nearest descriptors: candidates from a k-d tree in the ``search_dims`` leading principal
         # axes, re-ranked by their exact distance; the cost grows with the log of the map's size
         # instead of linearly (0: exact, by brute force)
@@ -110,6 +109,8 @@ class PoseVoting:
             self._mean = sample.mean(axis=0)
             self._axes = np.linalg.svd(sample - self._mean, full_matrices=False)[2][:search_dims].T
             self._tree = cKDTree((self.descriptors - self._mean) @ self._axes)
+        else:
+            self._desc_sq = (self.descriptors.astype(np.float32) ** 2).sum(axis=1)
         self.neighbours = int(neighbours)
         self.bin_xy = float(bin_xy)
         self.n_yaw = max(int(round(2.0 * math.pi / bin_yaw)), 1)
@@ -125,7 +126,7 @@ class PoseVoting:
 
         Modulo a half turn, ``bins`` bins, from the tangents of the pooled features.
         """
-        return _direction_histogram(self.angles, None, bins)
+        return _direction_histogram(self.angles, bins)
 
     def vote(self, query: ScanFeatures) -> Votes:
         """
@@ -206,23 +207,22 @@ class PoseVoting:
         return out
 
 
-def _direction_histogram(angles: np.ndarray, weights: np.ndarray | None, bins: int) -> np.ndarray:
+def _direction_histogram(angles: np.ndarray, bins: int) -> np.ndarray:
     """Return normalized histogram of line directions (angles modulo pi), smoothed over +-1 bin."""
     b = np.floor(np.mod(angles, math.pi) / math.pi * bins).astype(np.int64) % bins
-    h = np.bincount(b, weights=weights, minlength=bins).astype(float)
+    h = np.bincount(b, minlength=bins).astype(float)
     h = h + 0.5 * (np.roll(h, 1) + np.roll(h, -1))
     return h / max(h.sum(), 1e-12)
 
 
-def alignment_yaws(map_hist: np.ndarray, scan_angles: np.ndarray, scan_weights: np.ndarray | None,
-                   count: int) -> np.ndarray:
+def alignment_yaws(map_hist: np.ndarray, scan_angles: np.ndarray, count: int) -> np.ndarray:
     """
     Yaws (modulo a half turn) that best align a scan's wall directions with the map's.
 
     The ``count`` strongest local maxima of their circular cross-correlation.
     """
     bins = len(map_hist)
-    scan_hist = _direction_histogram(scan_angles, scan_weights, bins)
+    scan_hist = _direction_histogram(scan_angles, bins)
     corr = np.real(np.fft.ifft(np.fft.fft(map_hist) * np.conj(np.fft.fft(scan_hist))))
     peaks = np.flatnonzero((corr >= np.roll(corr, 1)) & (corr >= np.roll(corr, -1)))
     peaks = peaks[np.argsort(-corr[peaks], kind='stable')][:count]
