@@ -19,13 +19,14 @@ Algorithm (all vectorized numpy/scipy):
    limit times ``weak_spur_factor`` for weak arcs (obstacle points subtending < 60 deg on most
    pixels: wall noise); so are free-standing weak arcs and skeleton pieces shorter than
    ``min_spur_length``. Repeated until stable. Known limit: where a doorway opens into a room
-   deeper than ~1/ridge_ratio door widths the arc through the door can break; the room's GVD then
-   ends in dead-end nodes. 4. Nodes: *branch* nodes where three or more arcs meet (the paper's only
-   kind; nodes closer than ``merge_radius`` are merged), plus configurable extras that cover places
-   where branch nodes alone fail: *dead ends* of arcs, one *region* node (at the point of maximum
-   clearance) for every GVD component / free region without a node, and *arc* nodes spaced at most
-   ``arc_spacing`` apart along the GVD (farthest-point sampling by geodesic distance). 5. Edges
-   link nodes whose GVD territories (geodesic Voronoi cells on the skeleton) touch.
+   deeper than ~1/ridge_ratio door widths the arc through the door can break; the room's GVD
+   then ends in dead-end nodes.
+4. Nodes: *branch* nodes where three or more arcs meet (the paper's only kind; nodes closer than
+   ``merge_radius`` are merged), plus configurable extras that cover places where branch nodes
+   alone fail: *dead ends* of arcs, one *region* node (at the point of maximum clearance) for
+   every GVD component / free region without a node, and *arc* nodes spaced at most
+   ``arc_spacing`` apart along the GVD (farthest-point sampling by geodesic distance).
+5. Edges link nodes whose GVD territories (geodesic Voronoi cells on the skeleton) touch.
 """
 from __future__ import annotations
 
