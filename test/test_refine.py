@@ -14,7 +14,7 @@ import pytest
 from ssm_localization import simulate, SimulationConfig
 from ssm_localization.localization.refine import refine_pose, refine_poses, SurfaceModel
 from ssm_localization.localization.verify import BeamCheck, check_beams
-from ssm_localization.transforms import rotation, wrap_angle
+from ssm_localization.transforms import apply, rotation, wrap_angle
 
 RES = 0.1
 
@@ -146,6 +146,12 @@ def _laser_points(scan) -> np.ndarray:
     return np.column_stack((r * np.cos(a[ok]), r * np.sin(a[ok])))
 
 
+def _inlier_fraction(model: SurfaceModel, points: np.ndarray, res, distance=0.1) -> float:
+    """Return the fraction of ``points`` within ``distance`` of the surface at ``res``'s pose."""
+    r, _, valid = model.signed_distance(apply(res.pose, points))
+    return float(np.mean(valid & (np.abs(r + (res.depth - model.depth)) < distance)))
+
+
 def test_refine_pose_recovers_perturbed_pose(depot_clean):
     """3 cm / 2 deg off on clean ray-cast scans: back to < 2 mm with the default settings."""
     _, sim, model = depot_clean
@@ -155,10 +161,11 @@ def test_refine_pose_recovers_perturbed_pose(depot_clean):
         sign = rng.choice([-1.0, 1.0], 3)
         start = (truth[0] + 0.03 * sign[0], truth[1] - 0.03 * sign[1],
                  truth[2] + math.radians(2.0) * sign[2])
-        res = refine_pose(model, _laser_points(scan), start)
+        pts = _laser_points(scan)
+        res = refine_pose(model, pts, start)
         errors.append((math.hypot(res.pose[0] - truth[0], res.pose[1] - truth[1]) * 1e3,
                        math.degrees(abs(float(wrap_angle(res.pose[2] - truth[2])))),
-                       res.inlier_fraction))
+                       _inlier_fraction(model, pts, res)))
     text = ', '.join(f'{e:.2f} mm / {a:.3f} deg' for e, a, _ in errors)
     assert max(e for e, _, _ in errors) < 2.0, text
     assert max(a for _, a, _ in errors) < 0.1, text
@@ -180,6 +187,16 @@ def test_refine_zero_iterations_keeps_pose(depot_clean):
     res = refine_pose(model, _laser_points(sim.scans[1]), start, iterations=0)
     assert res.pose == pytest.approx(start)
     assert res.iterations == 0
+
+
+def test_explained_is_what_refinement_reports(depot_clean):
+    """``SurfaceModel.explained`` at a refined pose, its wall offset added: the result's."""
+    _, sim, model = depot_clean
+    pts = _laser_points(sim.scans[3])
+    res = refine_pose(model, pts, tuple(sim.sensor_poses[3]), estimate_depth=True)
+    got = model.explained(apply(res.pose, pts), res.depth - model.depth)
+    assert 0.9 < float(got) == pytest.approx(res.explained, abs=1e-9)
+    assert model.explained(pts + 1e4) == 0.0 and model.explained(np.zeros((0, 2))) == 0.0
 
 
 # --------------------------------------------------------------------------- check_beams
@@ -227,5 +244,5 @@ def test_batched_refinement_equals_single(depot_clean):
     for start, got in zip(starts, batch):
         one = refine_pose(model, pts, tuple(start))
         assert got.pose == pytest.approx(one.pose, abs=1e-9)
-        assert got.cost == pytest.approx(one.cost, rel=1e-9, abs=1e-12)
+        assert got.explained == pytest.approx(one.explained, rel=1e-9, abs=1e-12)
         assert np.allclose(got.covariance, one.covariance, rtol=1e-6, atol=1e-15)

@@ -93,6 +93,20 @@ class SurfaceModel:
         grad[valid] = np.column_stack((dcol, drow)) * SUBDIVISION @ rot.T
         return s, grad, valid
 
+    def explained(self, pts: np.ndarray, offset=0.0, sigma: float = 0.05) -> np.ndarray:
+        """
+        Return the fraction of a scan explained: ``mean exp(-r^2 / 2 sigma^2)`` over its points.
+
+        ``pts`` (..., N, 2) map-frame points; ``offset`` (...) metres added to their signed
+        distances (the wall surface estimated deeper); points off the grid explain nothing.
+        """
+        pts = np.asarray(pts, float)
+        shape = pts.shape[:-1]
+        r, _, valid = self.signed_distance(pts)
+        r = r.reshape(shape) + np.asarray(offset, float)[..., None]
+        e = np.where(valid.reshape(shape), np.exp(-0.5 * (r / sigma) ** 2), 0.0)
+        return e.mean(axis=-1) if shape[-1] else np.zeros(shape[:-1])
+
 
 def _touches(mask: np.ndarray) -> np.ndarray:
     """(H + 1, W + 1) lattice points with at least one of their four cells in ``mask``."""
@@ -104,9 +118,6 @@ def _touches(mask: np.ndarray) -> np.ndarray:
 class RefineResult:
     pose: Pose2                 # refined laser pose in the map frame
     covariance: np.ndarray      # (3, 3) of (x, y, yaw)
-    rms: float                  # robust RMS of the surface residuals of the inliers, metres
-    inlier_fraction: float      # endpoints within ``inlier_distance`` of the surface
-    cost: float                 # mean truncated squared residual min(r^2, d_in^2) of all endpoints
     iterations: int
     depth: float = 0.0          # wall surface behind the occupied-cell boundary, metres
     explained: float = 0.0      # mean of exp(-r^2 / 2 sigma^2): the fraction of the scan explained
@@ -119,9 +130,9 @@ def refine_pose(surface: SurfaceModel, points: np.ndarray, pose: Pose2, **kwargs
 
 def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *,
                  iterations: int = 12, huber: float = 0.1,
-                 truncate: tuple[float, float] = (0.3, 0.1), inlier_distance: float = 0.1,
-                 min_sigma: float = 0.005, estimate_depth: bool = False,
-                 depth_prior: float = 0.25, score_sigma: float = 0.05) -> list[RefineResult]:
+                 truncate: tuple[float, float] = (0.3, 0.1), min_sigma: float = 0.005,
+                 estimate_depth: bool = False, depth_prior: float = 0.25,
+                 score_sigma: float = 0.05) -> list[RefineResult]:
     """
     Gauss-Newton on ``sum rho(sdf(R p + t) + delta)`` for several laser poses at once (batched).
 
@@ -182,27 +193,17 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
         done_iters[ok] = it
         active &= enough & ((np.hypot(step[:, 0], step[:, 1]) >= 1e-5)
                             | (np.abs(step[:, 2]) >= 1e-6))
-    world, _ = _transform(x, pts)
-    r, _, valid = surface.signed_distance(world.reshape(-1, 2))
-    r = r.reshape(n_h, n_p) + delta[:, None]
-    valid = valid.reshape(n_h, n_p)
-    inl = valid & (np.abs(r) < inlier_distance)
-    explained = np.where(valid, np.exp(-0.5 * (r / score_sigma) ** 2), 0.0)
+    explained = surface.explained(_transform(x, pts)[0], delta, score_sigma)
     out = []
     for k in range(n_h):
         try:
             cov = sigma2[k] * np.linalg.inv(jtj[k])[:3, :3]
         except np.linalg.LinAlgError:
             cov = np.diag([1e3, 1e3, 1e3])
-        rk, ik = r[k], inl[k]
         out.append(RefineResult(
             pose=(float(x[k, 0]), float(x[k, 1]), float(x[k, 2])), covariance=cov,
-            rms=float(np.sqrt(np.mean(rk[ik] ** 2))) if ik.any() else float('inf'),
-            inlier_fraction=float(ik.mean()) if n_p else 0.0,
-            cost=(float(np.mean(np.where(ik, rk ** 2, inlier_distance ** 2))) if n_p
-                  else float('inf')),
             iterations=int(done_iters[k]), depth=float(surface.depth + delta[k]),
-            explained=float(explained[k].mean()) if n_p else 0.0))
+            explained=float(explained[k])))
     return out
 
 

@@ -311,11 +311,10 @@ class Tracker:
             return best
         laser = loc.laser_pose(pose)
         # the explained fraction as refine() measures it, with the wall offset it estimated
-        r, _, valid = loc.surface.signed_distance(apply(laser, query.features.points))
-        r = r + (best.depth - loc.surface.depth)
-        explained = np.where(valid, np.exp(-0.5 * (r / loc.config.score_sigma) ** 2), 0.0)
+        explained = loc.surface.explained(apply(laser, query.features.points),
+                                          best.depth - loc.surface.depth, loc.config.score_sigma)
         h = Hypothesis(source='prior', initial_pose=laser, laser_pose=laser, pose=pose,
-                       covariance=best.covariance, explained=float(explained.mean()),
+                       covariance=best.covariance, explained=float(explained),
                        depth=best.depth, refined=True)
         loc.verify(query, [h])
         return h
