@@ -1,5 +1,5 @@
 """
-Gaussian pose estimates: differences, Mahalanobis distances and fusion.
+Gaussian pose estimates: differences, Mahalanobis distances, lever arms and fusion.
 
 The fusion (``fuse_weak``) is that of a scan's pose with a motion prediction, along the directions
 the scan leaves undetermined.
@@ -29,6 +29,17 @@ def mahalanobis2(a: Pose2, b: Pose2, cov: np.ndarray) -> float:
         return float(d @ np.linalg.solve(np.asarray(cov, float), d))
     except np.linalg.LinAlgError:
         return float('inf')
+
+
+def lever_arm_covariance(cov: np.ndarray, offset) -> np.ndarray:
+    """
+    Return the covariance of a frame rigidly ``offset`` (dx, dy, map frame) from a pose.
+
+    First order: a yaw error moves the frame across the lever arm. ``cov`` is the pose's
+    (x, y, yaw) covariance.
+    """
+    jac = np.array([[1.0, 0.0, -offset[1]], [0.0, 1.0, offset[0]], [0.0, 0.0, 1.0]])
+    return jac @ np.asarray(cov, float) @ jac.T
 
 
 def weak_directions(cov: np.ndarray, weak_std: float) -> np.ndarray:

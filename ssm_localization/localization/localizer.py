@@ -28,6 +28,7 @@ vicinity score (eq. 10) wins, always ``ok``.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 import copy
 import dataclasses
 from dataclasses import dataclass, field
@@ -38,6 +39,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .correlative import CorrelativeGrid
+from .fusion import lever_arm_covariance
 from .refine import refine_poses, SurfaceModel
 from .verify import BeamCheck, check_beams
 from .voting import alignment_yaws, PoseVoting, Votes
@@ -424,28 +426,36 @@ class GlobalLocalizer:
             h.covariance = self.report_covariance(r.covariance, h.laser_pose)
         return _merged(sorted(todo, key=lambda h: -h.explained), lambda h: h.laser_pose)
 
-    def verify_contenders(self, query: Query, refined: list[Hypothesis]) -> None:
+    def verify_contenders(self, query: Query, refined: list[Hypothesis],
+                          first: int | None = None, margin: float | None = None,
+                          plausible: Callable[[Hypothesis], bool] | None = None) -> None:
         """
         Verify every hypothesis that could win or be a rival.
 
-        Best explained first: the ``verify_hypotheses`` first, every one within ``verify_margin``
-        of the best explained fraction, then, until none is left, every one that could still win
-        or be a rival: a score never exceeds the explained fraction, so an unverified hypothesis
-        explaining less than the best verified score minus ``ambiguity_margin`` can be neither.
+        ``refined`` comes best explained first. First the ``first`` best (default: the
+        ``verify_hypotheses`` best and every one within ``verify_margin`` of the best explained
+        fraction), then, until none is left, every one that could still win or be a rival: a score
+        never exceeds the explained fraction, so an unverified hypothesis explaining less than
+        the best ``plausible`` verified score minus ``margin`` (default ``ambiguity_margin``) can
+        be neither. ``plausible(h)`` defaults to at most ``max_contradicting`` through walls.
         """
         cfg = self.config
         if not refined:
             return
-        top = refined[0].explained
-        batch = [h for k, h in enumerate(refined)
-                 if k < cfg.verify_hypotheses or h.explained >= top - cfg.verify_margin]
+        margin = cfg.ambiguity_margin if margin is None else margin
+        limit = cfg.max_contradicting
+        plausible = plausible or (lambda h: h.contradicting <= limit)
+        if first is None:
+            top = refined[0].explained
+            batch = [h for k, h in enumerate(refined)
+                     if k < cfg.verify_hypotheses or h.explained >= top - cfg.verify_margin]
+        else:
+            batch = refined[:first]
         while batch:
             self.verify(query, batch)
-            limit = cfg.max_contradicting
-            best = max((h.score for h in refined
-                        if h.check is not None and h.contradicting <= limit), default=-np.inf)
-            batch = [h for h in refined
-                     if h.check is None and h.explained >= best - cfg.ambiguity_margin]
+            best = max((h.score for h in refined if h.check is not None and plausible(h)),
+                       default=-np.inf)
+            batch = [h for h in refined if h.check is None and h.explained >= best - margin]
 
     def verify(self, query: Query, hyps: list[Hypothesis]) -> None:
         """Ray-cast the query's beams from every hypothesis at once; compare with the scan."""
@@ -506,8 +516,7 @@ class GlobalLocalizer:
             [cfg.min_position_std ** 2, cfg.min_position_std ** 2, cfg.min_yaw_std ** 2])
         lx, ly, _ = self._base_from_laser
         off = apply((0.0, 0.0, laser_pose[2]), (lx, ly))[0]      # laser -> base, in the map
-        jac = np.array([[1.0, 0.0, -off[1]], [0.0, 1.0, off[0]], [0.0, 0.0, 1.0]])
-        return jac @ cov @ jac.T
+        return lever_arm_covariance(cov, off)
 
     # -- the paper's pipeline -----------------------------------------------------------------
     def _paper(self, query: Query, clock: _Clock) -> Localization:

@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from .fusion import lever_arm_covariance
 from ..config.tracking import TrackerConfig
 from ..files.reading import echo
 from ..transforms import compose, inverse, Pose2, wrap_angle
@@ -83,9 +84,9 @@ def predict(pose: Pose2, cov: np.ndarray, inc: Increment | None,
     new = compose(pose, inc.delta)
     c, s = math.cos(pose[2]), math.sin(pose[2])
     dx, dy = inc.delta[0], inc.delta[1]
-    # d new / d pose, and the increment's noise rotated into the map frame
-    jac_pose = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy],
-                         [0.0, 0.0, 1.0]])
+    # the pose's covariance carried over the increment (a lever arm), and the increment's noise
+    # rotated into the map frame
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    out = jac_pose @ cov @ jac_pose.T + rot @ motion_noise(inc, config) @ rot.T
+    out = (lever_arm_covariance(cov, (c * dx - s * dy, s * dx + c * dy))
+           + rot @ motion_noise(inc, config) @ rot.T)
     return new, 0.5 * (out + out.T)

@@ -42,7 +42,7 @@ import time
 
 import numpy as np
 
-from .fusion import fuse_weak, mahalanobis2
+from .fusion import fuse_weak, lever_arm_covariance, mahalanobis2
 from .localizer import (distinct, GlobalLocalizer, Hypothesis, Localization, position_std,
                         Query, STATUSES)
 from .motion import check_pose, Increment, predict
@@ -245,7 +245,12 @@ class Tracker:
         if not gated:
             return _Attempt('failed', f'no pose within the gate of the prediction '
                                       f'({len(refined)} refined)')
-        verified = self._verify_contenders(query, gated)
+        # the best first, then only the poses that could still win or be a rival (within
+        # ``rival_margin``): most scans cast one pose
+        loc.verify_contenders(query, gated, first=1, margin=cfg.rival_margin,
+                              plausible=self._plausible)
+        verified = sorted((h for h in gated if h.check is not None),
+                          key=lambda h: (not self._plausible(h), -h.score))
         top = verified[0]
         if not self._plausible(top):
             return _Attempt('failed', f'verification failed: explained {top.explained:.0%}, '
@@ -276,24 +281,6 @@ class Tracker:
         return _Attempt('ok', f'tracked: explained {best.explained:.0%}, through walls '
                               f'{fused.contradicting:.0%}, position std {std_xy * 1e3:.0f} mm',
                         **common)
-
-    def _verify_contenders(self, query: Query, gated: list[Hypothesis]) -> list[Hypothesis]:
-        """
-        Ray-cast the gated poses that could win or be a rival; return the verified, best first.
-
-        ``gated`` comes best explained first. A score never exceeds the explained fraction, so
-        once the best plausible score is known, a pose explaining less than it minus
-        ``rival_margin`` can be neither (the localizer's ``verify_contenders`` rule, with the
-        tracker's margin): most scans cast one pose.
-        """
-        batch, margin = gated[:1], self.config.rival_margin
-        while batch:
-            self.localizer.verify(query, batch)
-            top = max((h.score for h in gated
-                       if h.check is not None and self._plausible(h)), default=-math.inf)
-            batch = [h for h in gated if h.check is None and h.explained >= top - margin]
-        verified = [h for h in gated if h.check is not None]
-        return sorted(verified, key=lambda h: (not self._plausible(h), -h.score))
 
     def _plausible(self, h: Hypothesis) -> bool:
         """Tell whether a verified pose explains enough of the scan, few beams through walls."""
@@ -433,8 +420,7 @@ class Tracker:
 def _laser_covariance(cov: np.ndarray, base_yaw: float, laser_on_base: Pose2) -> np.ndarray:
     """Return the covariance of the laser pose ``base * laser_on_base`` (first order)."""
     off = apply((0.0, 0.0, base_yaw), laser_on_base[:2])[0]      # base -> laser, in the map
-    jac = np.array([[1.0, 0.0, -off[1]], [0.0, 1.0, off[0]], [0.0, 0.0, 1.0]])
-    return jac @ np.asarray(cov, float) @ jac.T
+    return lever_arm_covariance(cov, off)
 
 
 __all__ = ['MODES', 'STATUSES', 'TrackResult', 'Tracker']
