@@ -70,6 +70,6 @@ def test_alignment_yaws_recover_a_rotation():
                                 rng.normal(-0.2 + math.pi / 2, 0.01, 40)))
     hist = np.histogram(np.mod(map_dirs, math.pi), bins=180, range=(0, math.pi))[0].astype(float)
     hist = hist + 0.5 * (np.roll(hist, 1) + np.roll(hist, -1))
-    yaws = alignment_yaws(hist / hist.sum(), scan_dirs, 2)
+    yaws = alignment_yaws(np.fft.fft(hist / hist.sum()), scan_dirs, 2)
     turned = [abs(wrap_angle(4.0 * (y - 0.2))) / 4.0 for y in yaws]   # modulo 90 degrees
     assert min(turned) < math.radians(1.5)

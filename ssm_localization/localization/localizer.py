@@ -98,6 +98,20 @@ class Query:
     points: np.ndarray
     angles: np.ndarray
     beams: np.ndarray
+    _picked: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def picked_beams(self, count: int, max_range: float) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return ``count`` evenly spaced beams: angles and ranges (``inf`` beyond ``max_range``).
+
+        Computed once per query and arguments (the ray check of every hypothesis uses them).
+        """
+        key = (count, max_range)
+        if key not in self._picked:
+            pick = np.unique(np.linspace(0, len(self.angles) - 1, count).astype(int))
+            self._picked[key] = (self.angles[pick], np.where(self.beams[pick] > max_range,
+                                                             np.inf, self.beams[pick]))
+        return self._picked[key]
 
 
 @dataclass
@@ -198,7 +212,7 @@ class GlobalLocalizer:
         self.caster = RayCaster(occupied, m.resolution, m.origin)
         self.voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw,
                                  search_dims=cfg.vote_descriptor_dims)
-        self._map_directions = self.voting.orientation_histogram()
+        self._map_spectrum = np.fft.fft(self.voting.orientation_histogram())
         self._base_from_laser = inverse(cfg.laser_pose)
         self._paper_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
                                                  retries=0, ransac_hypotheses=1)
@@ -324,17 +338,18 @@ class GlobalLocalizer:
         return out
 
     def _peak_spectral(self, feats: ScanFeatures, votes: Votes, members: np.ndarray):
-        """Spectral matching (eqs. 2-6) of a peak's correspondences: (selection, eq. 5 score)."""
+        """
+        Spectral matching (eqs. 2-6) of a peak's correspondences: (selection, eq. 5 score).
+
+        The query's pairwise tables are its cached ``dist`` / ``angle``; the map's are built for
+        the peak's features only.
+        """
         mc = self.matcher_config
-        ui, li = np.unique(votes.qi[members], return_inverse=True)
         uj, lj = np.unique(votes.mj[members], return_inverse=True)
-        qp, qt = feats.points[ui], feats.tangents[ui]
-        mp = self.voting.points[uj]
-        mt = np.column_stack((np.cos(self.voting.angles[uj]), np.sin(self.voting.angles[uj])))
-        pairs = np.column_stack((lj.ravel(), li.ravel()))
-        g = affinity_matrix(distance_table(mp), angle_table(mt), distance_table(qp),
-                            angle_table(qt), pairs, mc.weights, mc.max_dist_deform,
-                            mc.max_angle_deform)
+        pairs = np.column_stack((lj.ravel(), votes.qi[members]))
+        g = affinity_matrix(distance_table(self.voting.points[uj]),
+                            angle_table(self.voting.tangents[uj]), feats.dist, feats.angle,
+                            pairs, mc.weights, mc.max_dist_deform, mc.max_angle_deform)
         x = leading_eigenvector(g, mc.power_iterations, mc.power_tol)
         sel = binarize(x, pairs, mc.binarize_min_ratio)
         return sel, matching_score(g, sel)
@@ -384,7 +399,7 @@ class GlobalLocalizer:
                 break
         feats = query.features
         scan_angles = np.arctan2(feats.tangents[:, 1], feats.tangents[:, 0])
-        for yaw in alignment_yaws(self._map_directions, scan_angles, cfg.search_alignments):
+        for yaw in alignment_yaws(self._map_spectrum, scan_angles, cfg.search_alignments):
             if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * cfg.search_step for c in centres):
                 centres.append(float(yaw))
         if not centres:
@@ -462,10 +477,9 @@ class GlobalLocalizer:
         if not hyps:
             return
         cfg = self.config
-        pick = np.unique(np.linspace(0, len(query.angles) - 1, cfg.verify_beams).astype(int))
-        expected = self.caster.cast(np.array([h.laser_pose for h in hyps]), query.angles[pick],
+        angles, measured = query.picked_beams(cfg.verify_beams, cfg.max_cast_range)
+        expected = self.caster.cast(np.array([h.laser_pose for h in hyps]), angles,
                                     cfg.max_cast_range)
-        measured = np.where(query.beams[pick] > cfg.max_cast_range, np.inf, query.beams[pick])
         for h, e in zip(hyps, expected):
             h.check = check_beams(measured, e, tol=cfg.beam_tolerance)
             h.score = h.explained - cfg.contradiction_weight * h.check.contradicting

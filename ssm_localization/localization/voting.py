@@ -95,9 +95,11 @@ class PoseVoting:
         first = np.ones(len(order), bool)
         first[1:] = np.any(key[order[1:]] != key[order[:-1]], axis=1)
         keep = np.sort(order[first])
-        #: map-frame feature positions (M, 2), tangent angles (M,), descriptors (M, D), node ids
+        #: map-frame feature positions (M, 2), tangent angles (M,) and unit tangents (M, 2),
+        #: descriptors (M, D), node ids
         self.points = points[keep]
         self.angles = angles[keep]
+        self.tangents = np.column_stack((np.cos(self.angles), np.sin(self.angles)))
         self.descriptors = np.concatenate(desc)[keep]
         self.nodes = np.concatenate(node)[keep]
         # nearest descriptors: candidates from a k-d tree in the ``search_dims`` leading principal
@@ -157,7 +159,11 @@ class PoseVoting:
         qi = np.repeat(np.arange(n_q), k)
         mj = top.ravel()
         qp = query.points[qi]
-        yaw = self.angles[mj] - np.arctan2(query.tangents[qi, 1], query.tangents[qi, 0])
+        # per query point: tangent angle and vote weight
+        q_angle = np.arctan2(query.tangents[:, 1], query.tangents[:, 0])
+        q_range = np.hypot(query.points[:, 0], query.points[:, 1])
+        q_weight = 1.0 / (1.0 + q_range / self.range_scale)
+        yaw = self.angles[mj] - q_angle[qi]
         c, s = np.cos(yaw), np.sin(yaw)
         tx = self.points[mj, 0] - (c * qp[:, 0] - s * qp[:, 1])
         ty = self.points[mj, 1] - (s * qp[:, 0] + c * qp[:, 1])
@@ -165,10 +171,9 @@ class PoseVoting:
         by = np.floor((ty - self._lo[1]) / self.bin_xy).astype(np.int64)
         ba = np.floor(np.mod(yaw, 2.0 * math.pi) / self.bin_yaw).astype(np.int64) % self.n_yaw
         inside = (bx >= 1) & (bx < self._n_xy[0] - 1) & (by >= 1) & (by < self._n_xy[1] - 1)
-        weight = 1.0 / (1.0 + np.hypot(qp[:, 0], qp[:, 1]) / self.range_scale)
         return Votes(qi=qi[inside], mj=mj[inside],
                      bins=np.column_stack((bx[inside], by[inside], ba[inside])),
-                     weight=weight[inside])
+                     weight=q_weight[qi[inside]])
 
     def peaks(self, votes: Votes, count: int) -> list[Peak]:
         """
@@ -215,15 +220,17 @@ def _direction_histogram(angles: np.ndarray, bins: int) -> np.ndarray:
     return h / max(h.sum(), 1e-12)
 
 
-def alignment_yaws(map_hist: np.ndarray, scan_angles: np.ndarray, count: int) -> np.ndarray:
+def alignment_yaws(map_spectrum: np.ndarray, scan_angles: np.ndarray, count: int) -> np.ndarray:
     """
     Yaws (modulo a half turn) that best align a scan's wall directions with the map's.
 
-    The ``count`` strongest local maxima of their circular cross-correlation.
+    The ``count`` strongest local maxima of their circular cross-correlation. ``map_spectrum`` is
+    ``np.fft.fft`` of the map's direction histogram (:meth:`PoseVoting.orientation_histogram`),
+    computed once per map.
     """
-    bins = len(map_hist)
+    bins = len(map_spectrum)
     scan_hist = _direction_histogram(scan_angles, bins)
-    corr = np.real(np.fft.ifft(np.fft.fft(map_hist) * np.conj(np.fft.fft(scan_hist))))
+    corr = np.real(np.fft.ifft(map_spectrum * np.conj(np.fft.fft(scan_hist))))
     peaks = np.flatnonzero((corr >= np.roll(corr, 1)) & (corr >= np.roll(corr, -1)))
     peaks = peaks[np.argsort(-corr[peaks], kind='stable')][:count]
     return peaks * (math.pi / bins)
