@@ -140,7 +140,7 @@ def test_spectral_hypotheses_are_ranked_peaks_matched_by_ransac(depot, localizer
 
 def test_search_at_the_true_yaw_finds_the_place(depot, localizer, query):
     truth = _truth(depot)
-    found = localizer.search_hypotheses(query, [], yaws=np.array([truth[2]]))
+    found = localizer.search_hypotheses(query, np.array([truth[2]]))
     assert found and all(h.source == 'search' for h in found)
     # a cell of the grid and exactly the yaw asked for
     assert _err(found[0].initial_pose, truth)[0] < 0.1
@@ -151,14 +151,15 @@ def test_search_seeded_by_a_flipped_hypothesis_finds_the_place(depot, localizer,
     """Seeds give their yaw and its flip: a hypothesis facing the wrong way still leads there."""
     x, y, yaw = _truth(depot)
     wrong = Hypothesis(source='spectral', initial_pose=(x + 7.0, y - 3.0, yaw + math.pi))
-    found = localizer.search_hypotheses(query, [wrong])
+    found = localizer.search_hypotheses(query,
+                                        localizer.search_yaws(query, [wrong.initial_pose[2]]))
     assert min(_err(h.initial_pose, (x, y, yaw))[0] for h in found) < 0.1
 
 
 def test_search_window_limits_the_positions(depot, localizer, query):
     x, y, yaw = _truth(depot)
     box = (x + 2.0, y + 2.0, x + 3.0, y + 3.0)               # a box away from the truth
-    found = localizer.search_hypotheses(query, [], window=box, yaws=np.array([yaw]))
+    found = localizer.search_hypotheses(query, np.array([yaw]), window=box)
     for h in found:
         assert box[0] - 0.05 <= h.initial_pose[0] <= box[2] + 0.05
         assert box[1] - 0.05 <= h.initial_pose[1] <= box[3] + 0.05

@@ -153,6 +153,11 @@ def distinct(a: Pose2, b: Pose2, xy: float, yaw: float) -> bool:
     return math.hypot(a[0] - b[0], a[1] - b[1]) > xy or abs(wrap_angle(a[2] - b[2])) > yaw
 
 
+def _by_correlation(hyps: list[Hypothesis]) -> list[Hypothesis]:
+    """Return scored hypotheses by their correlative score, best first, duplicates dropped."""
+    return _merged(sorted(hyps, key=lambda h: -h.correlative), lambda h: h.initial_pose)
+
+
 def _merged(ranked: list[Hypothesis], pose_of) -> list[Hypothesis]:
     """
     ``ranked`` without duplicates (the same pose within 5 cm and 0.02 rad).
@@ -288,13 +293,18 @@ class GlobalLocalizer:
         if self.config.paper_mode:
             return self._paper(query, clock)
         hyps = self.spectral_hypotheses(query, clock)
+        self._correlate(query, hyps)
         if self.config.search:
-            hyps += self.search_hypotheses(query, hyps)
+            seeds = _by_correlation(hyps)
+            found = self.search_hypotheses(
+                query, self.search_yaws(query, [h.initial_pose[2] for h in seeds]))
+            self._correlate(query, found)       # scored as the spectral ones are
+            hyps += found
             clock.lap('search')
         if not hyps:
             return self._failed(clock, 'no pose hypothesis: neither the pose votes nor the '
                                        'correlative search found a place that fits')
-        ranked = self._best_by_correlation(query, hyps)
+        ranked = _by_correlation(hyps)
         refined = self.refine(query, ranked)
         clock.lap('refine')
         self.verify_contenders(query, refined)
@@ -354,21 +364,18 @@ class GlobalLocalizer:
         sel = binarize(x, pairs, mc.binarize_min_ratio)
         return sel, matching_score(g, sel)
 
-    def search_hypotheses(self, query: Query, seeds: list[Hypothesis],
-                          window: tuple[float, float, float, float] | None = None,
-                          yaws: np.ndarray | None = None) -> list[Hypothesis]:
+    def search_hypotheses(self, query: Query, yaws: np.ndarray,
+                          window: tuple[float, float, float, float] | None = None
+                          ) -> list[Hypothesis]:
         """
-        Correlative branch and bound over the map.
+        Correlative branch and bound over the whole map (or ``window``) at the given ``yaws``.
 
-        (or ``window``) at the given ``yaws``, by default the yaws of the ``search_seeds`` best
-        seeds and their flips, +- ``search_spread``.
+        At most ``search_keep`` distinct leaves, best first (see :meth:`search_yaws`).
         """
         cfg = self.config
+        if len(yaws) == 0:
+            return []
         pts = _evenly(query.features.points, cfg.search_points)
-        if yaws is None:
-            yaws = self._seed_yaws(query, seeds)
-            if len(yaws) == 0:
-                return []
         found = self.grid.search(pts, yaws=yaws, window=window, min_score=cfg.search_min_score,
                                  ratio=cfg.search_ratio, budget_s=cfg.search_budget)
         out: list[Hypothesis] = []
@@ -382,17 +389,17 @@ class GlobalLocalizer:
                 break
         return out
 
-    def _seed_yaws(self, query: Query, seeds: list[Hypothesis]) -> np.ndarray:
+    def search_yaws(self, query: Query, yaws) -> np.ndarray:
         """
-        Yaws to search.
+        Return the yaws to search around the orientations ``yaws``, best first.
 
-        The orientations of the best hypotheses by correlative score, up to ``search_seeds``
-        distinct ones (modulo a half turn), each with its flip, each +- ``search_spread``.
+        Up to ``search_seeds`` of them distinct modulo a half turn, then the
+        ``search_alignments`` yaws that align the scan's wall directions with the map's; each
+        with its flip, each +- ``search_spread``.
         """
         cfg = self.config
         centres: list[float] = []
-        for h in self._best_by_correlation(query, seeds):
-            yaw = h.initial_pose[2]
+        for yaw in yaws:
             if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * cfg.search_step for c in centres):
                 centres.append(yaw)
             if len(centres) >= cfg.search_seeds:
@@ -408,15 +415,14 @@ class GlobalLocalizer:
         n = int(round(cfg.search_spread / cfg.search_step))
         return np.concatenate([base + cfg.search_step * k for k in range(-n, n + 1)])
 
-    def _best_by_correlation(self, query: Query, hyps: list[Hypothesis]) -> list[Hypothesis]:
-        """Hypotheses by their correlative score, best first, duplicates dropped."""
+    def _correlate(self, query: Query, hyps: list[Hypothesis]) -> None:
+        """Set the correlative score (mean point likelihood) of each hypothesis' initial pose."""
         if not hyps:
-            return []
+            return
         scores = self.grid.score_poses(query.features.points,
                                        np.array([h.initial_pose for h in hyps]))
         for h, s in zip(hyps, scores):
             h.correlative = float(s)
-        return _merged(sorted(hyps, key=lambda h: -h.correlative), lambda h: h.initial_pose)
 
     def refine(self, query: Query, hyps: list[Hypothesis],
                limit: int | None = None) -> list[Hypothesis]:

@@ -234,9 +234,8 @@ class Tracker:
         truncated = bool(max(reach[:2]) > cfg.window_xy[1] or reach[2] > cfg.window_yaw[1])
         n = int(math.ceil(hyaw / cfg.yaw_step))
         yaws = laser[2] + cfg.yaw_step * np.arange(-n, n + 1)
-        leaves = loc.search_hypotheses(query, [], window=(laser[0] - hx, laser[1] - hy,
-                                                          laser[0] + hx, laser[1] + hy),
-                                       yaws=yaws)
+        leaves = loc.search_hypotheses(query, yaws, window=(laser[0] - hx, laser[1] - hy,
+                                                            laser[0] + hx, laser[1] + hy))
         hyps = [Hypothesis(source='prior', initial_pose=laser)] + leaves[:cfg.track_hypotheses]
         refined = loc.refine(query, hyps, limit=len(hyps))
         # squared Mahalanobis distance of each refined pose from the prediction
@@ -331,8 +330,8 @@ class Tracker:
         """
         cfg, loc = self.config, self.localizer
         lc = loc.config
-        seed = Hypothesis(source='prior', initial_pose=loc.laser_pose(attempt.pose))
-        others = [h for h in loc.search_hypotheses(query, [seed])
+        yaws = loc.search_yaws(query, [loc.laser_pose(attempt.pose)[2]])
+        others = [h for h in loc.search_hypotheses(query, yaws)
                   if distinct(loc.base_pose(h.initial_pose), attempt.pose, lc.distinct_xy,
                               lc.distinct_yaw)]
         rival = None
