@@ -2,8 +2,9 @@
 ``ssm_localization replay BAG -o RESULTS.csv``.
 
 Localize every scan of a bag: by default every scan on its own (single-scan global
-localization); ``--track`` tracks the scans in order with the bag's ``/odom`` (without odometry
-when the bag has none), falling back on global localization when the track is lost
+localization); ``--track`` tracks the scans in order with the bag's ``/odom`` interpolated at
+their stamps as the node does (without odometry where there is none within ``--odom-max-age``),
+falling back on global localization when the track is lost
 (``localization/tracker.py``).
 """
 from __future__ import annotations
@@ -11,11 +12,11 @@ from __future__ import annotations
 import argparse
 import time
 
-from .arguments import add_max_map_cells, nonnegative_int
+from .arguments import add_max_map_cells, nonnegative_float, nonnegative_int
 from ..config.params import load_configs, load_tracker_config
 from ..evaluation.plotting import check_plot_path, plot_replay
 from ..evaluation.replay import match_truth, replay_scans, summarize, write_results_csv
-from ..evaluation.tracking import summarize_track, track_scans
+from ..evaluation.tracking import ODOM_MAX_AGE, odometry_at, summarize_track, track_scans
 from ..files.writing import check_output_file
 from ..io.bag_reader import read_bag
 from ..localization.localizer import GlobalLocalizer
@@ -39,6 +40,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              '`tracker` section of --params); global localization when lost')
     parser.add_argument('--no-odom', action='store_true',
                         help='with --track: ignore /odom (track without odometry)')
+    parser.add_argument('--odom-max-age', type=nonnegative_float, default=ODOM_MAX_AGE,
+                        metavar='S', help='with --track: odometry is interpolated at each scan '
+                                          'stamp; a scan with none within S seconds is tracked '
+                                          "without (the node's odom_max_age)")
     parser.add_argument('--limit', type=nonnegative_int, default=0,
                         help='localize only the first N scans (0 = all)')
     add_max_map_cells(parser)
@@ -71,10 +76,15 @@ def run(args: argparse.Namespace) -> int:
     scans = bag.scans[:args.limit] if args.limit > 0 else bag.scans
     if track_cfg is not None:
         stamps = [s.stamp for s in scans]
-        odom = match_truth(stamps, {} if args.no_odom else bag.odom)
-        if not any(o is not None for o in odom):
-            print('tracking without odometry (no /odom in the bag)' if not args.no_odom
-                  else 'tracking without odometry (--no-odom)')
+        odom = odometry_at(stamps, {} if args.no_odom else bag.odom, args.odom_max_age)
+        missing = sum(o is None for o in odom)
+        if args.no_odom:
+            print('tracking without odometry (--no-odom)')
+        elif not bag.odom:
+            print('tracking without odometry (no /odom in the bag)')
+        elif missing:
+            print(f'tracking without odometry on {missing} of {len(odom)} scans (no /odom '
+                  f'within {args.odom_max_age:g} s of their stamps)')
         rows = track_scans(Tracker(localizer, track_cfg), scans, odom,
                            match_truth(stamps, bag.ground_truth), progress=not args.quiet)
     else:

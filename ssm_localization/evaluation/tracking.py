@@ -15,14 +15,18 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 import math
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from tqdm import tqdm
 
 from .replay import ResultRow, summarize, Summary
+from ..io.bag_records import stamp_to_ns
 from ..localization.tracker import Tracker, TrackResult
-from ..transforms import Pose2
+from ..transforms import Pose2, pose_at_time
+
+#: odometry further than this from a scan's stamp (s) is not used (the node's ``odom_max_age``)
+ODOM_MAX_AGE = 0.5
 
 
 @dataclass
@@ -43,6 +47,14 @@ class TrackRow(ResultRow):
     def right(self) -> bool:
         """Answered ``ok`` and within the success bounds of the ground truth."""
         return self.status == 'ok' and self.has_truth and self.correct
+
+
+def odometry_at(stamps: Sequence[float], odom: Mapping[float, Pose2],
+                max_age: float = ODOM_MAX_AGE) -> list[Pose2 | None]:
+    """Return the odometry pose at each stamp (None: none close), as the node interpolates it."""
+    timed = sorted({stamp_to_ns(s): p for s, p in odom.items()}.items())
+    age = int(max_age * 1e9)
+    return [pose_at_time(timed, stamp_to_ns(t), age) for t in stamps]
 
 
 def track_scans(tracker: Tracker, scans: Sequence, odom: Sequence[Pose2 | None] | None = None,
