@@ -58,9 +58,8 @@ def run(args: argparse.Namespace) -> int:
     track_cfg = load_tracker_config(args.params) if args.track else None
     index = load_index(args.index, max_cells=args.max_map_cells) if args.index else None
     grid = load_map_yaml(args.map, max_cells=args.max_map_cells) if args.map else None
-    own_map = index is not None or grid is not None     # the bag's /map is not used then
-    bag = read_bag(args.bag, scan_topic=args.scan_topic,
-                   max_map_cells=0 if own_map else args.max_map_cells)
+    bag = read_bag(args.bag, scan_topic=args.scan_topic, max_map_cells=args.max_map_cells,
+                   read_map=index is None and grid is None)
     if not bag.scans:
         raise ValueError(f'{args.bag}: no LaserScan messages on {args.scan_topic}')
     if index is None:
