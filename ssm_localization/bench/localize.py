@@ -37,13 +37,13 @@ from .peer import ExhaustiveLocalizer
 from ..config.params import load_configs
 from ..config.simulation import SimulationConfig
 from ..evaluation.plotting import plot_replay
-from ..evaluation.replay import ResultRow, SUCCESS_XY, SUCCESS_YAW, summarize
+from ..evaluation.replay import ResultRow, summarize, within_success
 from ..io.carmen import build_map, log_scan_records, read_carmen_log
 from ..io.simulate import simulate
-from ..localization.localizer import GlobalLocalizer, Localization
+from ..localization.localizer import GlobalLocalizer, Hypothesis, Localization
 from ..mapping.index import build_index
 from ..mapping.map_io import load_map_yaml, save_map_yaml
-from ..transforms import Pose2, wrap_angle
+from ..transforms import Pose2
 
 CLUTTER = {'clutter': 8, 'short_fraction': 0.05}
 SIM_SETS = {
@@ -126,9 +126,10 @@ def _real_queries(data: Path, work: Path, name: str, limit: int):
     return grid, scans, truth
 
 
-def _right(pose, truth: Pose2) -> bool:
-    return (pose is not None and math.hypot(pose[0] - truth[0], pose[1] - truth[1]) <= SUCCESS_XY
-            and abs(float(wrap_angle(pose[2] - truth[2]))) <= SUCCESS_YAW)
+def _hypothesis_right(localizer: GlobalLocalizer, h: Hypothesis, truth: Pose2) -> bool:
+    """Return whether ``h`` was right: its initial pose, or its refined pose once refined."""
+    return (within_success(localizer.base_pose(h.initial_pose), truth)
+            or (h.refined and within_success(h.pose, truth)))
 
 
 def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> str | None:
@@ -139,19 +140,18 @@ def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> s
     but not among the verified; ranked below a wrong pose; right but refused (ambiguous: a rival /
     degenerate geometry; failed: explains too little).
     """
-    if loc.status == 'ok' and _right(loc.pose, truth):
+    if loc.status == 'ok' and within_success(loc.pose, truth):
         return None
     cands = loc.candidates
     if not cands:
         return f'no hypothesis at all ({loc.status})'
-    if not any(_right(localizer.base_pose(h.initial_pose), truth)
-               or (h.refined and _right(h.pose, truth)) for h in cands):
+    if not any(_hypothesis_right(localizer, h, truth) for h in cands):
         return f'no right hypothesis ({loc.status})'
-    if not any(h.refined and _right(h.pose, truth) for h in cands):
+    if not any(h.refined and within_success(h.pose, truth) for h in cands):
         return f'right one lost in refinement ({loc.status})'
-    if not any(h.check is not None and _right(h.pose, truth) for h in cands):
+    if not any(h.check is not None and within_success(h.pose, truth) for h in cands):
         return f'right one refined, not verified ({loc.status})'
-    if not _right(loc.pose, truth):
+    if not within_success(loc.pose, truth):
         return f'ranked below a wrong pose ({loc.status})'
     if loc.status == 'ambiguous':
         return ('right but ambiguous: degenerate geometry' if loc.message.startswith('degenerate')
@@ -187,12 +187,11 @@ def run_set(localizer, scans, truth: dict, breakdown: bool = True) -> SetRun:
         rows.append(ResultRow.from_localization(scan.stamp, loc, gt))
         if gt is None:
             continue
-        if loc.status == 'ok' and _right(loc.pose, gt):
+        if loc.status == 'ok' and within_success(loc.pose, gt):
             covered.append(_coverage(loc.covariance, loc.pose, gt))
-            spectral += any('spectral' in h.found_by and (_right(h.pose, gt) if h.refined else
-                                                          _right(localizer.base_pose(
-                                                              h.initial_pose), gt))
-                            for h in loc.candidates) if breakdown else 0
+            if breakdown:
+                spectral += any('spectral' in h.found_by and _hypothesis_right(localizer, h, gt)
+                                for h in loc.candidates)
         elif breakdown:
             stages[miss_stage(localizer, loc, gt)] += 1
     return SetRun(rows, covered, stages, spectral)
@@ -209,7 +208,7 @@ def _line(name: str, label: str, run: SetRun) -> str:
 
 
 def _breakdown(run: SetRun) -> str:
-    successes = sum(r.status == 'ok' and r.correct for r in run.rows if r.has_truth)
+    successes = sum(r.right for r in run.rows)
     misses = sum(run.stages.values())
     parts = [f'{v} {k}' for k, v in run.stages.most_common()]
     found = f'right pose among the spectral hypotheses in {run.spectral_found}/{successes} ' \

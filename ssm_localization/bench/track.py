@@ -106,7 +106,7 @@ def _single(localizer: GlobalLocalizer, seq: ScanSequence, tracked) -> str:
                         progress=False)
     s = summarize(rows)
     alone = [k for k, r in enumerate(rows) if r.status != 'ok']
-    kept = sum(tracked[k].status == 'ok' and tracked[k].correct for k in alone)
+    kept = sum(tracked[k].right for k in alone)
     return (f'  single-scan: success {s.success_rate:.1%} precision {s.precision:.2%}, latency '
             f'p50 {s.latency_p50_ms:.0f} p95 {s.latency_p95_ms:.0f} ms; {len(alone)} scans not '
             f'ok on their own ({s.ambiguous} ambiguous, {s.failed} failed), tracked right and '
