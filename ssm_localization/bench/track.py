@@ -34,7 +34,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .localize import _data_dir, real_map, REAL_SETS
-from ..config.params import load_configs, load_tracker_config
+from ..config.params import load_all_configs
 from ..evaluation.plotting import plot_track
 from ..evaluation.replay import replay_scans, summarize
 from ..evaluation.tracking import summarize_track, track_scans, TrackSummary
@@ -139,8 +139,7 @@ def run(args: argparse.Namespace) -> int:
         args.scans = 200
     sets = list(REAL_SETS) if 'all' in args.sets else args.sets
     data, work = _data_dir(args.data), Path(args.work)
-    index_cfg, loc_cfg = load_configs(args.params)
-    track_cfg = load_tracker_config(args.params)
+    index_cfg, loc_cfg, track_cfg = load_all_configs(args.params)
     for name in sets:
         t0 = time.perf_counter()
         log, grid = real_map(data, work, REAL_SETS[name])

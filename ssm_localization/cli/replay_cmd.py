@@ -13,7 +13,7 @@ import argparse
 import time
 
 from .arguments import add_max_map_cells, nonnegative_float, nonnegative_int
-from ..config.params import load_configs, load_tracker_config
+from ..config.params import load_all_configs
 from ..evaluation.plotting import check_plot_path, plot_replay
 from ..evaluation.replay import match_truth, replay_scans, summarize, write_results_csv
 from ..evaluation.tracking import ODOM_MAX_AGE, odometry_at, summarize_track, track_scans
@@ -54,8 +54,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_file(args.output, 'results file')
     if args.plot:
         check_plot_path(args.plot)
-    index_cfg, loc_cfg = load_configs(args.params)
-    track_cfg = load_tracker_config(args.params) if args.track else None
+    index_cfg, loc_cfg, track_cfg = load_all_configs(args.params)
     index = load_index(args.index, max_cells=args.max_map_cells) if args.index else None
     grid = load_map_yaml(args.map, max_cells=args.max_map_cells) if args.map else None
     bag = read_bag(args.bag, scan_topic=args.scan_topic, max_map_cells=args.max_map_cells,
@@ -73,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         print(f'indexed map: {len(index.features)} nodes in {time.perf_counter() - t0:.2f} s')
     localizer = GlobalLocalizer(index, loc_cfg)
     scans = bag.scans[:args.limit] if args.limit > 0 else bag.scans
-    if track_cfg is not None:
+    if args.track:
         stamps = [s.stamp for s in scans]
         odom = odometry_at(stamps, {} if args.no_odom else bag.odom, args.odom_max_age)
         missing = sum(o is None for o in odom)
@@ -90,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         rows = replay_scans(localizer, scans, bag.ground_truth, progress=not args.quiet)
     write_results_csv(rows, args.output)
     print(f'wrote {len(rows)} rows to {args.output}')
-    if track_cfg is not None:
+    if args.track:
         print(summarize_track(rows).format('track'))
     elif any(r.has_truth for r in rows):
         print(summarize(rows).format('replay'))
