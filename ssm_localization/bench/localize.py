@@ -38,7 +38,7 @@ from ..config.params import load_configs
 from ..config.simulation import SimulationConfig
 from ..evaluation.plotting import plot_replay
 from ..evaluation.replay import ResultRow, summarize, within_success
-from ..io.carmen import build_map, log_scan_records, read_carmen_log
+from ..io.carmen import build_map, CarmenLog, log_scan_records, read_carmen_log
 from ..io.simulate import simulate
 from ..localization.localizer import GlobalLocalizer, Hypothesis, Localization
 from ..mapping.index import build_index
@@ -62,9 +62,9 @@ ALL_SETS = DEFAULT_SETS + list(REAL_SIM_SETS)
 TUNING_SETS = frozenset({'depot', 'depot_clutter', 'depot_fov180', 'intel', 'aces'})
 
 
-def split_of(name: str) -> str:
+def split_of(name: str, tuning: frozenset[str] = TUNING_SETS) -> str:
     """Return ``'tuning'`` for a set the defaults were chosen on, else ``'validation'``."""
-    return 'tuning' if name in TUNING_SETS else 'validation'
+    return 'tuning' if name in tuning else 'validation'
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -106,13 +106,19 @@ def real_map(data: Path, work: Path, name: str):
     The map is cached in ``work``.
     """
     log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
+    return log, real_grid(data, work, name, log)
+
+
+def real_grid(data: Path, work: Path, name: str, log: CarmenLog | None = None):
+    """Return the map of :func:`real_map`; the log is read only to build a map not cached yet."""
     map_yaml = work / f'{name}_even.yaml'
     if map_yaml.exists():
-        return log, load_map_yaml(map_yaml)
+        return load_map_yaml(map_yaml)
+    if log is None:
+        log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
     grid = build_map(log, indices=range(0, len(log), 2))
-    work.mkdir(parents=True, exist_ok=True)
-    save_map_yaml(grid, map_yaml)
-    return log, grid
+    save_map_yaml(grid, map_yaml)       # creates work/
+    return grid
 
 
 def _real_queries(data: Path, work: Path, name: str, limit: int):
@@ -234,7 +240,13 @@ def run(args: argparse.Namespace) -> int:
     sets = ALL_SETS if 'all' in args.sets else args.sets
     data, work = _data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg = load_configs(args.params)
-    indexes: dict[str, object] = {}
+    built: dict[tuple[str, str], object] = {}     # (map, localizer kind): built once per map
+
+    def once(map_name: str, kind: str, make):
+        if (map_name, kind) not in built:
+            built[map_name, kind] = make()
+        return built[map_name, kind]
+
     pooled: dict[str, list[ResultRow]] = {}
     for name in sets:
         t0 = time.perf_counter()
@@ -243,28 +255,29 @@ def run(args: argparse.Namespace) -> int:
             grid, scans, truth = _real_queries(data, work, REAL_SETS[name], args.real_max)
         elif name in REAL_SIM_SETS:
             map_name, extra = REAL_SIM_SETS[name]
-            _, grid = real_map(data, work, REAL_SETS[map_name])
+            grid = real_grid(data, work, REAL_SETS[map_name])
             scans, truth = _sim_queries(grid, args.n, args.seed, extra)
         else:
             map_name, extra = SIM_SETS[name]
             grid = load_map_yaml(data / 'maps' / f'{map_name}.yaml')
             scans, truth = _sim_queries(grid, args.n, args.seed, extra)
-        if map_name not in indexes:
-            indexes[map_name] = build_index(grid, index_cfg)
-        index = indexes[map_name]
-        ours = run_set(GlobalLocalizer(index, loc_cfg), scans, truth)
+        localizer = once(map_name, 'ssm',
+                         lambda: GlobalLocalizer(build_index(grid, index_cfg), loc_cfg))
+        index = localizer.index
+        ours = run_set(localizer, scans, truth)
         print(_line(name, 'ssm', ours), flush=True)
         print(_breakdown(ours), flush=True)
         pooled.setdefault(split_of(name), []).extend(ours.rows)
         if args.plot_dir:
-            Path(args.plot_dir).mkdir(parents=True, exist_ok=True)
             plot_replay(index, ours.rows, Path(args.plot_dir) / f'{name}.png', title=name)
         if args.paper:
             paper_cfg = dataclasses.replace(loc_cfg, paper_mode=True, top_n=5)
-            paper = run_set(GlobalLocalizer(index, paper_cfg), scans, truth, breakdown=False)
+            paper = run_set(once(map_name, 'paper', lambda: GlobalLocalizer(index, paper_cfg)),
+                            scans, truth, breakdown=False)
             print(_line(name, 'paper', paper), flush=True)
         if args.peer:
-            peer = run_set(ExhaustiveLocalizer(index), scans, truth, breakdown=False)
+            peer_of = once(map_name, 'peer', lambda: ExhaustiveLocalizer(index, ours=localizer))
+            peer = run_set(peer_of, scans, truth, breakdown=False)
             print(_line(name, 'peer', peer), flush=True)
             print(_compare(ours, peer), flush=True)
         print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
