@@ -19,7 +19,7 @@ from ssm_localization.evaluation.replay import match_truth
 from ssm_localization.evaluation.tracking import (detected_losses, odometry_at, recovery_after,
                                                   summarize_track, track_scans, TrackRow)
 from ssm_localization.io.bag_records import ScanRecord
-from ssm_localization.io.sequences import kidnap_sequence, ScanSequence
+from ssm_localization.io.sequences import kidnap_sequence, ScanSequence, splice_kidnaps
 from ssm_localization.localization.fusion import fuse_weak, mahalanobis2
 from ssm_localization.localization.motion import check_pose, Increment, predict
 from ssm_localization.localization.tracker import Tracker
@@ -244,6 +244,10 @@ def test_kidnap_sequence_keeps_the_odometry_going():
     assert inside == pytest.approx((0.5, 0.0, 0.0), abs=1e-9)     # within a segment: as logged
     with pytest.raises(ValueError, match='overlap'):
         kidnap_sequence(seq, starts=(0.0, 0.1), length=0.2)
+    single = splice_kidnaps(seq, [(20, 40), (8, 30)])       # five scans before, four after
+    assert [s.stamp for s in single.scans] == [16, 17, 18, 19, 20, 40, 41, 42, 43,
+                                               4, 5, 6, 7, 8, 30, 31, 32, 33]
+    assert single.kidnaps == [5, 9, 14]
 
 
 def test_odometry_at_interpolates_between_messages_at_another_rate():
