@@ -142,29 +142,18 @@ def resolve(key: str, rosdep: dict[str, dict[str, Any]],
     return Resolution(key, False, reason='; '.join(reasons))
 
 
-def _read(rosdistro: Path, relpath: str) -> tuple[str, str]:
-    """(text of ``relpath`` at HEAD, commit) of a rosdistro work tree or bare git directory."""
-    git = ['git', '-C', str(rosdistro)]
-    commit = subprocess.run([*git, 'rev-parse', 'HEAD'], capture_output=True, text=True,
-                            check=True).stdout.strip()
-    if (rosdistro / relpath).is_file():
-        return (rosdistro / relpath).read_text(), commit
-    text = subprocess.run([*git, 'show', f'HEAD:{relpath}'], capture_output=True, text=True,
+def _git(rosdistro: Path, *args: str) -> str:
+    return subprocess.run(['git', '-C', str(rosdistro), *args], capture_output=True, text=True,
                           check=True).stdout
-    return text, commit
 
 
 def check_live(rosdistro: Path, keys: list[str]) -> tuple[list[Resolution], dict[str, str]]:
-    """Resolve ``keys`` against a rosdistro checkout; also return its commit and date."""
-    rosdep = {}
-    commit = ''
-    for relpath in ROSDEP_FILES:
-        text, commit = _read(rosdistro, relpath)
-        rosdep[relpath] = yaml.safe_load(text) or {}
-    text, commit = _read(rosdistro, DISTRIBUTION_FILE)
-    released = released_packages(yaml.safe_load(text) or {})
-    date = subprocess.run(['git', '-C', str(rosdistro), 'show', '-s', '--format=%cs', 'HEAD'],
-                          capture_output=True, text=True, check=True).stdout.strip()
+    """Resolve ``keys`` against a rosdistro checkout at HEAD; also return its commit and date."""
+    commit, date = _git(rosdistro, 'show', '-s', '--format=%H %cs', 'HEAD').split()
+    rosdep = {relpath: yaml.safe_load(_git(rosdistro, 'show', f'{commit}:{relpath}')) or {}
+              for relpath in ROSDEP_FILES}
+    distribution = _git(rosdistro, 'show', f'{commit}:{DISTRIBUTION_FILE}')
+    released = released_packages(yaml.safe_load(distribution) or {})
     return [resolve(k, rosdep, released) for k in keys], {'commit': commit, 'date': date}
 
 

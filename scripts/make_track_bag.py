@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 from ssm_localization.io.bag_writer import write_bag
 from ssm_localization.io.carmen import read_carmen_log
-from ssm_localization.io.sequences import kidnap_sequence, log_sequence, ScanSequence, splice
+from ssm_localization.io.sequences import (kidnap_sequence, log_sequence, ScanSequence,
+                                           splice_kidnaps)
 from ssm_localization.mapping.map_io import load_map_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,10 +43,8 @@ def aces_lookalike(data: Path) -> ScanSequence:
     """Return the ACES look-alike kidnaps, restamped one second apart."""
     log = read_carmen_log(data / 'carmen' / 'aces-corrected.log.gz')
     seq = log_sequence(log, name='aces')
-    segments = []
-    for before, after in LOOKALIKE:
-        segments += [(before - 4, before + 1), (after, after + 4)]
-    return splice(seq, segments, name='aces_lookalike').restamped(seq.scans[0].stamp, 1.0)
+    spliced = splice_kidnaps(seq, LOOKALIKE, name='aces_lookalike')
+    return spliced.restamped(seq.scans[0].stamp, 1.0)
 
 
 BAGS = {'intel_track': (intel_track, 'intel'), 'aces_lookalike': (aces_lookalike, 'aces')}

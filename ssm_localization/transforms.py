@@ -6,6 +6,9 @@ into frame a: ``p_a = R(yaw) @ p_b + (x, y)``.
 """
 from __future__ import annotations
 
+import bisect
+from typing import Sequence
+
 import numpy as np
 
 Pose2 = tuple[float, float, float]
@@ -62,3 +65,31 @@ def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
 
 def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def interpolate(a: Pose2, b: Pose2, f: float) -> Pose2:
+    """Return the pose a fraction ``f`` of the way from ``a`` to ``b`` (yaw the short way)."""
+    return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]),
+            float(wrap_angle(a[2] + f * float(wrap_angle(b[2] - a[2])))))
+
+
+def pose_at_time(timed: Sequence[tuple[int, Pose2]], t: int, max_age: int) -> Pose2 | None:
+    """
+    Return the pose at time ``t`` from ``(time, pose)`` pairs in increasing time order.
+
+    The pose at ``t`` exactly, else interpolated between the poses around ``t`` when they are at
+    most ``2 * max_age`` apart, else the nearest one within ``max_age``; None when none is that
+    close. Times in any one unit (integer nanoseconds keep stamps exact).
+    """
+    after = bisect.bisect_left(timed, t, key=lambda tp: tp[0])
+    if after < len(timed) and timed[after][0] == t:
+        return timed[after][1]
+    if 0 < after < len(timed):
+        (s0, p0), (s1, p1) = timed[after - 1], timed[after]
+        if s1 - s0 <= 2 * max_age:
+            return interpolate(p0, p1, (t - s0) / (s1 - s0))
+    near = [timed[k] for k in (after - 1, after) if 0 <= k < len(timed)]
+    if not near:
+        return None
+    s, pose = min(near, key=lambda tp: abs(tp[0] - t))
+    return pose if abs(s - t) <= max_age else None

@@ -125,6 +125,26 @@ def test_convert_intel(tmp_path):
         carmen.convert_carmen(_log_path('intel'), tmp_path, every=25, last=400)
 
 
+def test_failed_map_write_keeps_the_old_bag(tmp_path, monkeypatch):
+    """Bag and map are one transaction: overwriting fails whole when the map cannot be saved."""
+    res = carmen.convert_carmen(_log_path('intel'), tmp_path, every=50, first=0, last=200)
+    before = sorted((p.relative_to(res.bag), p.read_bytes()) for p in res.bag.rglob('*')
+                    if p.is_file())
+
+    def fail(*_args, **_kwargs):
+        raise ValueError('map file: cannot write (disk full)')
+
+    monkeypatch.setattr(carmen, 'save_map_yaml', fail)
+    with pytest.raises(ValueError, match='disk full'):
+        carmen.convert_carmen(_log_path('intel'), tmp_path, every=25, first=0, last=400,
+                              overwrite=True)
+    after = sorted((p.relative_to(res.bag), p.read_bytes()) for p in res.bag.rglob('*')
+                   if p.is_file())
+    assert after == before and len(read_bag(res.bag).scans) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['intel.pgm', 'intel.yaml',
+                                                          'intel_queries']
+
+
 def test_odometry_without_reset_lines(tmp_path):
     """A log whose ODOM lines are plain raw odometry: increments chain from scan to scan."""
     log = tmp_path / 'raw.log'

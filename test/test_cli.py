@@ -207,6 +207,33 @@ def test_replay_track_without_odometry(intel_track, tmp_path, capsys):
     assert rc == 0 and 'tracking without odometry (--no-odom)' in capsys.readouterr().out
 
 
+def test_replay_track_interpolates_odometry_at_another_rate(intel_track, tmp_path, capsys):
+    """/odom at 5 Hz, offset from the scans: interpolated at the scans' stamps as the node does."""
+    path, bag = intel_track
+    scans = bag.scans[:40]
+    stamps = np.array([s.stamp for s in scans])
+    poses = np.array([bag.odom[s] for s in stamps])
+    times = np.arange(stamps[0] - 0.13, stamps[-1] + 0.2, 0.2)
+    yaw = np.interp(times, stamps, np.unwrap(poses[:, 2]))
+    odom = {float(t): (float(np.interp(t, stamps, poses[:, 0])),
+                       float(np.interp(t, stamps, poses[:, 1])),
+                       float(math.remainder(a, math.tau)))
+            for t, a in zip(times, yaw)
+            if np.abs(stamps - t).min() > 0.005                     # no stamp shared with a scan
+            and not any(abs(t - stamps[k]) < 1.0 for k in (10, 11))}     # none near two scans
+    odd = tmp_path / 'odom_5hz'
+    write_bag(odd, map=bag.map, scans=scans, odom=odom,
+              ground_truth={s.stamp: bag.ground_truth[s.stamp] for s in scans})
+    out = tmp_path / 'track.csv'
+    rc = main(['replay', str(odd), '-o', str(out), '--track', '--quiet'])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert 'tracking without odometry on 2 of 40 scans' in captured.out, captured.out
+    _, rows = _read_csv(out)
+    assert len(rows) == 40 and sum(r['mode'] == 'tracked' for r in rows) >= 36
+    assert sum(_right(r, bag) for r in rows) >= 38
+
+
 def test_replay_track_without_a_map_is_a_clear_error(intel_track, tmp_path, capsys):
     _, bag = intel_track
     no_map = tmp_path / 'no_map'

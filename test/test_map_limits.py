@@ -133,6 +133,8 @@ def test_bag_maps_are_guarded(tmp_path):
     with pytest.raises(MapTooLargeError, match='/map: OccupancyGrid message: map of 200 x 140'):
         read_bag(tmp_path / 'b', require_scans=False, max_map_cells=1000)
     assert read_bag(tmp_path / 'b', require_scans=False).map.shape == (140, 200)
+    skipped = read_bag(tmp_path / 'b', require_scans=False, max_map_cells=1000, read_map=False)
+    assert skipped.map is None and skipped.topic_counts == {'/map': 1}     # not decoded
 
 
 def test_failed_writers_leave_nothing_behind(tmp_path):

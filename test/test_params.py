@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 from ssm_localization.config import (flatten, from_dict, IndexConfig, LEARNED_WEIGHTS,
-                                     load_configs, LocalizerConfig, MapBuildConfig, MatcherConfig,
-                                     SimulationConfig, TopologyConfig, unflatten)
+                                     load_all_configs, load_configs, LocalizerConfig,
+                                     MapBuildConfig, MatcherConfig, SimulationConfig,
+                                     TopologyConfig, unflatten)
 from ssm_localization.config.fields import help_of
 import yaml
 
@@ -133,6 +134,21 @@ def test_load_configs_dotted_keys_and_laser_pose(tmp_path):
     # laser_x/y/yaw feed both configs (and win over localizer.laser_pose)
     assert loc_cfg.laser_pose == (0.2, 0.0, 3.1)
     assert index_cfg.sensor_pose == (0.2, 0.0, 3.1)
+
+
+def test_load_all_configs_reads_the_file_once(tmp_path, monkeypatch):
+    from ssm_localization.config import params
+    p = _write(tmp_path, 'localizer: {top_n: 3}\ntracker: {max_misses: 4}\nlaser_x: 0.1\n')
+    reads = []
+    load = params.load_yaml_file
+    monkeypatch.setattr(params, 'load_yaml_file', lambda *a: reads.append(a) or load(*a))
+    configs = load_all_configs(p)
+    assert len(reads) == 1
+    assert configs.localizer.top_n == 3 and configs.tracker.max_misses == 4
+    assert configs.index.sensor_pose == configs.localizer.laser_pose == (0.1, 0.0, 0.0)
+    assert tuple(load_configs(p)) == configs[:2]
+    with pytest.raises(ValueError, match="params.yaml: unknown parameter tracker.'no_such'"):
+        load_all_configs(_write(tmp_path, 'tracker: {no_such: 1}\n'))
 
 
 def test_load_configs_wildcard_node_section(tmp_path):

@@ -182,6 +182,12 @@ def test_odometry_buffer_interpolates_and_refuses_stale_odometry():
     assert len(buf) == 2
 
 
+def test_replay_uses_the_nodes_odom_max_age():
+    from ssm_localization.evaluation.tracking import ODOM_MAX_AGE
+    from ssm_localization.ros.parameters import NODE_PARAMS
+    assert NODE_PARAMS['odom_max_age'][0] == ODOM_MAX_AGE
+
+
 class _TfBuffer:
     """A stand-in for tf2_ros.Buffer: one fixed odom <- base_link transform."""
 

@@ -117,6 +117,15 @@ def test_resolution_rules(rosdistro):
     assert re.fullmatch(r'[0-9a-f]{40}', origin['commit'])
 
 
+def test_live_check_reads_the_reported_commit_not_the_work_tree(rosdistro):
+    (rosdistro / 'rosdep' / 'base.yaml').write_text(yaml.safe_dump({'plain-list': None}))
+    results, origin = crk.check_live(rosdistro, ['plain-list'])
+    assert results[0].ok and results[0].detail == 'apt: libplain'      # HEAD's, not the edit
+    head = subprocess.run(['git', '-C', str(rosdistro), 'rev-parse', 'HEAD'], check=True,
+                          capture_output=True, text=True).stdout.strip()
+    assert origin['commit'] == head
+
+
 def test_write_snapshot_round_trip(rosdistro, tmp_path, capsys):
     xml = tmp_path / 'package.xml'
     xml.write_text('<package format="3"><exec_depend>nav2_amcl</exec_depend>'

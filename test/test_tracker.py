@@ -16,10 +16,10 @@ from ssm_localization import build_index, GlobalLocalizer, read_bag
 from ssm_localization.config.params import load_tracker_config
 from ssm_localization.config.tracking import TrackerConfig
 from ssm_localization.evaluation.replay import match_truth
-from ssm_localization.evaluation.tracking import (detected_losses, recovery_after,
+from ssm_localization.evaluation.tracking import (detected_losses, odometry_at, recovery_after,
                                                   summarize_track, track_scans, TrackRow)
 from ssm_localization.io.bag_records import ScanRecord
-from ssm_localization.io.sequences import kidnap_sequence, ScanSequence
+from ssm_localization.io.sequences import kidnap_sequence, ScanSequence, splice_kidnaps
 from ssm_localization.localization.fusion import fuse_weak, mahalanobis2
 from ssm_localization.localization.motion import check_pose, Increment, predict
 from ssm_localization.localization.tracker import Tracker
@@ -244,6 +244,24 @@ def test_kidnap_sequence_keeps_the_odometry_going():
     assert inside == pytest.approx((0.5, 0.0, 0.0), abs=1e-9)     # within a segment: as logged
     with pytest.raises(ValueError, match='overlap'):
         kidnap_sequence(seq, starts=(0.0, 0.1), length=0.2)
+    single = splice_kidnaps(seq, [(20, 40), (8, 30)])       # five scans before, four after
+    assert [s.stamp for s in single.scans] == [16, 17, 18, 19, 20, 40, 41, 42, 43,
+                                               4, 5, 6, 7, 8, 30, 31, 32, 33]
+    assert single.kidnaps == [5, 9, 14]
+
+
+def test_odometry_at_interpolates_between_messages_at_another_rate():
+    odom = {10.0: (0.0, 0.0, 3.1), 10.2: (1.0, 2.0, -3.1), 12.0: (5.0, 5.0, 0.0)}
+    got = odometry_at([10.1, 10.2, 10.6, 10.8, 9.6, 9.4, 12.4, 11.1], odom)
+    x, y, yaw = got[0]
+    assert (x, y) == pytest.approx((0.5, 1.0))
+    assert abs(math.remainder(yaw - math.pi, 2 * math.pi)) < 1e-6     # the short way round
+    assert got[1] == (1.0, 2.0, -3.1)
+    assert got[2] == (1.0, 2.0, -3.1)                   # 1.8 s gap: the nearest within 0.5 s
+    assert got[3] is None and got[4] == (0.0, 0.0, 3.1) and got[5] is None
+    assert got[6] == (5.0, 5.0, 0.0) and got[7] is None
+    assert odometry_at([10.05], odom, max_age=0.01) == [None]
+    assert odometry_at([1.0, 2.0], {}) == [None, None]
 
 
 def test_recoveries_and_losses_from_rows():

@@ -37,13 +37,13 @@ from .peer import ExhaustiveLocalizer
 from ..config.params import load_configs
 from ..config.simulation import SimulationConfig
 from ..evaluation.plotting import plot_replay
-from ..evaluation.replay import ResultRow, SUCCESS_XY, SUCCESS_YAW, summarize
-from ..io.carmen import build_map, log_scan_records, read_carmen_log
+from ..evaluation.replay import ResultRow, summarize, within_success
+from ..io.carmen import build_map, CarmenLog, log_scan_records, read_carmen_log
 from ..io.simulate import simulate
-from ..localization.localizer import GlobalLocalizer, Localization
+from ..localization.localizer import GlobalLocalizer, Hypothesis, Localization
 from ..mapping.index import build_index
 from ..mapping.map_io import load_map_yaml, save_map_yaml
-from ..transforms import Pose2, wrap_angle
+from ..transforms import Pose2
 
 CLUTTER = {'clutter': 8, 'short_fraction': 0.05}
 SIM_SETS = {
@@ -62,9 +62,9 @@ ALL_SETS = DEFAULT_SETS + list(REAL_SIM_SETS)
 TUNING_SETS = frozenset({'depot', 'depot_clutter', 'depot_fov180', 'intel', 'aces'})
 
 
-def split_of(name: str) -> str:
+def split_of(name: str, tuning: frozenset[str] = TUNING_SETS) -> str:
     """Return ``'tuning'`` for a set the defaults were chosen on, else ``'validation'``."""
-    return 'tuning' if name in TUNING_SETS else 'validation'
+    return 'tuning' if name in tuning else 'validation'
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -106,13 +106,19 @@ def real_map(data: Path, work: Path, name: str):
     The map is cached in ``work``.
     """
     log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
+    return log, real_grid(data, work, name, log)
+
+
+def real_grid(data: Path, work: Path, name: str, log: CarmenLog | None = None):
+    """Return the map of :func:`real_map`; the log is read only to build a map not cached yet."""
     map_yaml = work / f'{name}_even.yaml'
     if map_yaml.exists():
-        return log, load_map_yaml(map_yaml)
+        return load_map_yaml(map_yaml)
+    if log is None:
+        log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
     grid = build_map(log, indices=range(0, len(log), 2))
-    work.mkdir(parents=True, exist_ok=True)
-    save_map_yaml(grid, map_yaml)
-    return log, grid
+    save_map_yaml(grid, map_yaml)       # creates work/
+    return grid
 
 
 def _real_queries(data: Path, work: Path, name: str, limit: int):
@@ -126,9 +132,10 @@ def _real_queries(data: Path, work: Path, name: str, limit: int):
     return grid, scans, truth
 
 
-def _right(pose, truth: Pose2) -> bool:
-    return (pose is not None and math.hypot(pose[0] - truth[0], pose[1] - truth[1]) <= SUCCESS_XY
-            and abs(float(wrap_angle(pose[2] - truth[2]))) <= SUCCESS_YAW)
+def _hypothesis_right(localizer: GlobalLocalizer, h: Hypothesis, truth: Pose2) -> bool:
+    """Return whether ``h`` was right: its initial pose, or its refined pose once refined."""
+    return (within_success(localizer.base_pose(h.initial_pose), truth)
+            or (h.refined and within_success(h.pose, truth)))
 
 
 def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> str | None:
@@ -139,19 +146,18 @@ def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> s
     but not among the verified; ranked below a wrong pose; right but refused (ambiguous: a rival /
     degenerate geometry; failed: explains too little).
     """
-    if loc.status == 'ok' and _right(loc.pose, truth):
+    if loc.status == 'ok' and within_success(loc.pose, truth):
         return None
     cands = loc.candidates
     if not cands:
         return f'no hypothesis at all ({loc.status})'
-    if not any(_right(localizer.base_pose(h.initial_pose), truth)
-               or (h.refined and _right(h.pose, truth)) for h in cands):
+    if not any(_hypothesis_right(localizer, h, truth) for h in cands):
         return f'no right hypothesis ({loc.status})'
-    if not any(h.refined and _right(h.pose, truth) for h in cands):
+    if not any(h.refined and within_success(h.pose, truth) for h in cands):
         return f'right one lost in refinement ({loc.status})'
-    if not any(h.check is not None and _right(h.pose, truth) for h in cands):
+    if not any(h.check is not None and within_success(h.pose, truth) for h in cands):
         return f'right one refined, not verified ({loc.status})'
-    if not _right(loc.pose, truth):
+    if not within_success(loc.pose, truth):
         return f'ranked below a wrong pose ({loc.status})'
     if loc.status == 'ambiguous':
         return ('right but ambiguous: degenerate geometry' if loc.message.startswith('degenerate')
@@ -187,12 +193,11 @@ def run_set(localizer, scans, truth: dict, breakdown: bool = True) -> SetRun:
         rows.append(ResultRow.from_localization(scan.stamp, loc, gt))
         if gt is None:
             continue
-        if loc.status == 'ok' and _right(loc.pose, gt):
+        if loc.status == 'ok' and within_success(loc.pose, gt):
             covered.append(_coverage(loc.covariance, loc.pose, gt))
-            spectral += any('spectral' in h.found_by and (_right(h.pose, gt) if h.refined else
-                                                          _right(localizer.base_pose(
-                                                              h.initial_pose), gt))
-                            for h in loc.candidates) if breakdown else 0
+            if breakdown:
+                spectral += any('spectral' in h.found_by and _hypothesis_right(localizer, h, gt)
+                                for h in loc.candidates)
         elif breakdown:
             stages[miss_stage(localizer, loc, gt)] += 1
     return SetRun(rows, covered, stages, spectral)
@@ -209,7 +214,7 @@ def _line(name: str, label: str, run: SetRun) -> str:
 
 
 def _breakdown(run: SetRun) -> str:
-    successes = sum(r.status == 'ok' and r.correct for r in run.rows if r.has_truth)
+    successes = sum(r.right for r in run.rows)
     misses = sum(run.stages.values())
     parts = [f'{v} {k}' for k, v in run.stages.most_common()]
     found = f'right pose among the spectral hypotheses in {run.spectral_found}/{successes} ' \
@@ -235,7 +240,13 @@ def run(args: argparse.Namespace) -> int:
     sets = ALL_SETS if 'all' in args.sets else args.sets
     data, work = _data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg = load_configs(args.params)
-    indexes: dict[str, object] = {}
+    built: dict[tuple[str, str], object] = {}     # (map, localizer kind): built once per map
+
+    def once(map_name: str, kind: str, make):
+        if (map_name, kind) not in built:
+            built[map_name, kind] = make()
+        return built[map_name, kind]
+
     pooled: dict[str, list[ResultRow]] = {}
     for name in sets:
         t0 = time.perf_counter()
@@ -244,28 +255,29 @@ def run(args: argparse.Namespace) -> int:
             grid, scans, truth = _real_queries(data, work, REAL_SETS[name], args.real_max)
         elif name in REAL_SIM_SETS:
             map_name, extra = REAL_SIM_SETS[name]
-            _, grid = real_map(data, work, REAL_SETS[map_name])
+            grid = real_grid(data, work, REAL_SETS[map_name])
             scans, truth = _sim_queries(grid, args.n, args.seed, extra)
         else:
             map_name, extra = SIM_SETS[name]
             grid = load_map_yaml(data / 'maps' / f'{map_name}.yaml')
             scans, truth = _sim_queries(grid, args.n, args.seed, extra)
-        if map_name not in indexes:
-            indexes[map_name] = build_index(grid, index_cfg)
-        index = indexes[map_name]
-        ours = run_set(GlobalLocalizer(index, loc_cfg), scans, truth)
+        localizer = once(map_name, 'ssm',
+                         lambda: GlobalLocalizer(build_index(grid, index_cfg), loc_cfg))
+        index = localizer.index
+        ours = run_set(localizer, scans, truth)
         print(_line(name, 'ssm', ours), flush=True)
         print(_breakdown(ours), flush=True)
         pooled.setdefault(split_of(name), []).extend(ours.rows)
         if args.plot_dir:
-            Path(args.plot_dir).mkdir(parents=True, exist_ok=True)
             plot_replay(index, ours.rows, Path(args.plot_dir) / f'{name}.png', title=name)
         if args.paper:
             paper_cfg = dataclasses.replace(loc_cfg, paper_mode=True, top_n=5)
-            paper = run_set(GlobalLocalizer(index, paper_cfg), scans, truth, breakdown=False)
+            paper = run_set(once(map_name, 'paper', lambda: GlobalLocalizer(index, paper_cfg)),
+                            scans, truth, breakdown=False)
             print(_line(name, 'paper', paper), flush=True)
         if args.peer:
-            peer = run_set(ExhaustiveLocalizer(index), scans, truth, breakdown=False)
+            peer_of = once(map_name, 'peer', lambda: ExhaustiveLocalizer(index, ours=localizer))
+            peer = run_set(peer_of, scans, truth, breakdown=False)
             print(_line(name, 'peer', peer), flush=True)
             print(_compare(ours, peer), flush=True)
         print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from ..localization.correlative import CorrelativeGrid
-from ..localization.localizer import distinct, Hypothesis, Localization
+from ..localization.localizer import distinct, GlobalLocalizer, Hypothesis, Localization
 from ..localization.refine import refine_poses, SurfaceModel
 from ..mapping.index import MapIndex
 from ..matching.scan import downsample_even, ranges_to_points
@@ -36,18 +36,36 @@ class PeerConfig:
     rival_ratio: float = 0.98               # a distinct leaf within this ratio: ambiguous
     distinct_xy: float = 0.5
     distinct_yaw: float = math.radians(10.0)
+    surface_depth: float = 0.5              # of the refinement's wall surface (cells)
 
 
 class ExhaustiveLocalizer:
-    """``localize_scan`` with the localizer's signature, by exhaustive search."""
+    """
+    ``localize_scan`` with the localizer's signature, by exhaustive search.
 
-    def __init__(self, index: MapIndex, config: PeerConfig | None = None) -> None:
+    ``ours``: a GlobalLocalizer on the same index whose correlative grid and wall surface are
+    reused where their parameters are the peer's (they are the same precomputed tables).
+    """
+
+    def __init__(self, index: MapIndex, config: PeerConfig | None = None,
+                 ours: GlobalLocalizer | None = None) -> None:
         self.config = cfg = config or PeerConfig()
         m = index.map
-        occupied = m.occupied_mask(index.config.occupied_thresh)
-        self.grid = CorrelativeGrid(m, occupied_thresh=index.config.occupied_thresh,
-                                    sigma=cfg.sigma, depth=cfg.depth, max_range=cfg.max_range)
-        self.surface = SurfaceModel.from_occupancy(occupied, m.resolution, m.origin, 0.5)
+        lc = ours.config if ours is not None and ours.index is index else None
+        if lc is not None and (lc.search_sigma, lc.search_depth, lc.max_cast_range,
+                               ours.grid.resolution) == (cfg.sigma, cfg.depth, cfg.max_range,
+                                                         m.resolution):
+            self.grid = ours.grid
+        else:
+            self.grid = CorrelativeGrid(m, occupied_thresh=index.config.occupied_thresh,
+                                        sigma=cfg.sigma, depth=cfg.depth,
+                                        max_range=cfg.max_range)
+        if lc is not None and lc.surface_depth == cfg.surface_depth:
+            self.surface = ours.surface
+        else:
+            occupied = m.occupied_mask(index.config.occupied_thresh)
+            self.surface = SurfaceModel.from_occupancy(occupied, m.resolution, m.origin,
+                                                       cfg.surface_depth)
 
     def localize_scan(self, ranges, angle_min: float, angle_increment: float,
                       range_min: float = 0.0, range_max: float = float('inf')) -> Localization:

@@ -33,12 +33,13 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from .localize import _data_dir, real_map, REAL_SETS
-from ..config.params import load_configs, load_tracker_config
+from .localize import _data_dir, real_map, REAL_SETS, split_of
+from ..config.params import load_all_configs
 from ..evaluation.plotting import plot_track
 from ..evaluation.replay import replay_scans, summarize
 from ..evaluation.tracking import summarize_track, track_scans, TrackSummary
-from ..io.sequences import kidnap_sequence, log_sequence, ScanSequence, splice
+from ..io.sequences import (KIDNAP_AFTER, KIDNAP_BEFORE, kidnap_sequence, log_sequence,
+                            ScanSequence, splice_kidnaps)
 from ..localization.localizer import GlobalLocalizer
 from ..localization.tracker import Tracker
 from ..mapping.index import build_index
@@ -106,7 +107,7 @@ def _single(localizer: GlobalLocalizer, seq: ScanSequence, tracked) -> str:
                         progress=False)
     s = summarize(rows)
     alone = [k for k, r in enumerate(rows) if r.status != 'ok']
-    kept = sum(tracked[k].status == 'ok' and tracked[k].correct for k in alone)
+    kept = sum(tracked[k].right for k in alone)
     return (f'  single-scan: success {s.success_rate:.1%} precision {s.precision:.2%}, latency '
             f'p50 {s.latency_p50_ms:.0f} p95 {s.latency_p95_ms:.0f} ms; {len(alone)} scans not '
             f'ok on their own ({s.ambiguous} ambiguous, {s.failed} failed), tracked right and '
@@ -121,10 +122,10 @@ def random_kidnaps(localizer: GlobalLocalizer, config, seq: ScanSequence, count:
     wrong, recoveries = 0, []
     for _ in tqdm(range(count), desc=f'{seq.name} kidnaps', leave=False):
         while True:
-            i, j = (int(v) for v in rng.integers(4, len(seq) - 4, 2))
+            i, j = (int(v) for v in rng.integers(KIDNAP_BEFORE - 1, len(seq) - KIDNAP_AFTER, 2))
             if np.hypot(*(truth[i, :2] - truth[j, :2])) >= 1.0:
                 break
-        _, ts = _track(localizer, config, splice(seq, [(i - 4, i + 1), (j, j + 4)]))
+        _, ts = _track(localizer, config, splice_kidnaps(seq, [(i, j)]))
         wrong += ts.recoveries[0].wrong_ok
         recoveries.append(ts.recoveries[0].scans)
     counts = Counter('never' if r is None else str(r) for r in recoveries)
@@ -139,8 +140,7 @@ def run(args: argparse.Namespace) -> int:
         args.scans = 200
     sets = list(REAL_SETS) if 'all' in args.sets else args.sets
     data, work = _data_dir(args.data), Path(args.work)
-    index_cfg, loc_cfg = load_configs(args.params)
-    track_cfg = load_tracker_config(args.params)
+    index_cfg, loc_cfg, track_cfg = load_all_configs(args.params)
     for name in sets:
         t0 = time.perf_counter()
         log, grid = real_map(data, work, REAL_SETS[name])
@@ -154,13 +154,12 @@ def run(args: argparse.Namespace) -> int:
             runs.append((f'{args.max_range:g}m', real.limited(args.max_range), True))
         for label, seq, odometry in runs:
             rows, ts = _track(localizer, track_cfg, seq, odometry)
-            split = 'tune' if name in TUNING_SETS else 'valid'
-            print(ts.format(f'{name:6s} {label:7s} [{split}]'), flush=True)
+            print(ts.format(f'{name:6s} {label:7s} [{split_of(name, TUNING_SETS)}]'),
+                  flush=True)
             print(verdict(ts), flush=True)
             if odometry and not seq.kidnaps and args.single:
                 print(_single(localizer, seq, rows), flush=True)
             if args.plot_dir:
-                Path(args.plot_dir).mkdir(parents=True, exist_ok=True)
                 plot_track(grid, rows, Path(args.plot_dir) / f'track_{name}_{label}.png',
                            seq.kidnaps, title=f'{name} {label}')
         if args.random_kidnaps > 0:

@@ -2,8 +2,9 @@
 ``ssm_localization replay BAG -o RESULTS.csv``.
 
 Localize every scan of a bag: by default every scan on its own (single-scan global
-localization); ``--track`` tracks the scans in order with the bag's ``/odom`` (without odometry
-when the bag has none), falling back on global localization when the track is lost
+localization); ``--track`` tracks the scans in order with the bag's ``/odom`` interpolated at
+their stamps as the node does (without odometry where there is none within ``--odom-max-age``),
+falling back on global localization when the track is lost
 (``localization/tracker.py``).
 """
 from __future__ import annotations
@@ -11,11 +12,11 @@ from __future__ import annotations
 import argparse
 import time
 
-from .arguments import add_max_map_cells, nonnegative_int
-from ..config.params import load_configs, load_tracker_config
+from .arguments import add_max_map_cells, nonnegative_float, nonnegative_int
+from ..config.params import load_all_configs
 from ..evaluation.plotting import check_plot_path, plot_replay
 from ..evaluation.replay import match_truth, replay_scans, summarize, write_results_csv
-from ..evaluation.tracking import summarize_track, track_scans
+from ..evaluation.tracking import ODOM_MAX_AGE, odometry_at, summarize_track, track_scans
 from ..files.writing import check_output_file
 from ..io.bag_reader import read_bag
 from ..localization.localizer import GlobalLocalizer
@@ -39,6 +40,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              '`tracker` section of --params); global localization when lost')
     parser.add_argument('--no-odom', action='store_true',
                         help='with --track: ignore /odom (track without odometry)')
+    parser.add_argument('--odom-max-age', type=nonnegative_float, default=ODOM_MAX_AGE,
+                        metavar='S', help='with --track: odometry is interpolated at each scan '
+                                          'stamp; a scan with none within S seconds is tracked '
+                                          "without (the node's odom_max_age)")
     parser.add_argument('--limit', type=nonnegative_int, default=0,
                         help='localize only the first N scans (0 = all)')
     add_max_map_cells(parser)
@@ -49,13 +54,11 @@ def run(args: argparse.Namespace) -> int:
     check_output_file(args.output, 'results file')
     if args.plot:
         check_plot_path(args.plot)
-    index_cfg, loc_cfg = load_configs(args.params)
-    track_cfg = load_tracker_config(args.params) if args.track else None
+    index_cfg, loc_cfg, track_cfg = load_all_configs(args.params)
     index = load_index(args.index, max_cells=args.max_map_cells) if args.index else None
     grid = load_map_yaml(args.map, max_cells=args.max_map_cells) if args.map else None
-    own_map = index is not None or grid is not None     # the bag's /map is not used then
-    bag = read_bag(args.bag, scan_topic=args.scan_topic,
-                   max_map_cells=0 if own_map else args.max_map_cells)
+    bag = read_bag(args.bag, scan_topic=args.scan_topic, max_map_cells=args.max_map_cells,
+                   read_map=index is None and grid is None)
     if not bag.scans:
         raise ValueError(f'{args.bag}: no LaserScan messages on {args.scan_topic}')
     if index is None:
@@ -69,19 +72,24 @@ def run(args: argparse.Namespace) -> int:
         print(f'indexed map: {len(index.features)} nodes in {time.perf_counter() - t0:.2f} s')
     localizer = GlobalLocalizer(index, loc_cfg)
     scans = bag.scans[:args.limit] if args.limit > 0 else bag.scans
-    if track_cfg is not None:
+    if args.track:
         stamps = [s.stamp for s in scans]
-        odom = match_truth(stamps, {} if args.no_odom else bag.odom)
-        if not any(o is not None for o in odom):
-            print('tracking without odometry (no /odom in the bag)' if not args.no_odom
-                  else 'tracking without odometry (--no-odom)')
+        odom = odometry_at(stamps, {} if args.no_odom else bag.odom, args.odom_max_age)
+        missing = sum(o is None for o in odom)
+        if args.no_odom:
+            print('tracking without odometry (--no-odom)')
+        elif not bag.odom:
+            print('tracking without odometry (no /odom in the bag)')
+        elif missing:
+            print(f'tracking without odometry on {missing} of {len(odom)} scans (no /odom '
+                  f'within {args.odom_max_age:g} s of their stamps)')
         rows = track_scans(Tracker(localizer, track_cfg), scans, odom,
                            match_truth(stamps, bag.ground_truth), progress=not args.quiet)
     else:
         rows = replay_scans(localizer, scans, bag.ground_truth, progress=not args.quiet)
     write_results_csv(rows, args.output)
     print(f'wrote {len(rows)} rows to {args.output}')
-    if track_cfg is not None:
+    if args.track:
         print(summarize_track(rows).format('track'))
     elif any(r.has_truth for r in rows):
         print(summarize(rows).format('replay'))

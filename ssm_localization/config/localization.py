@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-from .fields import param
+from .fields import check_numbers, param
 
 
 @dataclass(frozen=True)
@@ -108,20 +108,12 @@ class LocalizerConfig:
                     'surface_depth_std', 'beam_tolerance', 'score_sigma',
                     'distinct_xy', 'distinct_yaw', 'max_position_std', 'covariance_scale',
                     'sigma_d')
-        for name in positive:
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f'LocalizerConfig.{name} must be a finite number > 0, '
-                                 f'got {value!r}')
-        for name in ('vote_descriptor_dims', 'search_spread', 'search_alignments',
-                     'refine_iterations', 'polish_iterations', 'surface_depth', 'search_min_score',
-                     'contradiction_weight', 'max_contradicting', 'min_score', 'verify_margin',
-                     'ambiguity_margin',
-                     'min_position_std', 'min_yaw_std', 'min_points'):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError(f'LocalizerConfig.{name} must be a finite number >= 0, '
-                                 f'got {value!r}')
+        nonnegative = ('vote_descriptor_dims', 'search_spread', 'search_alignments',
+                       'refine_iterations', 'polish_iterations', 'surface_depth',
+                       'search_min_score', 'contradiction_weight', 'max_contradicting',
+                       'min_score', 'verify_margin', 'ambiguity_margin', 'min_position_std',
+                       'min_yaw_std', 'min_points')
+        check_numbers(self, positive, nonnegative)
         if not 0.0 < self.search_ratio <= 1.0:
             raise ValueError(f'LocalizerConfig.search_ratio must be in (0, 1], got '
                              f'{self.search_ratio!r}')

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 
-from .fields import param
+from .fields import check_numbers, param
 from .matcher import MatcherConfig
 
 
@@ -37,11 +37,9 @@ class TopologyConfig:
     min_region_area: float = param(0.5, 'free regions smaller than this (m^2) get no region node')
 
     def __post_init__(self) -> None:
-        for name in ('min_clearance', 'ridge_ratio', 'spur_factor', 'weak_spur_factor',
-                     'min_spur_length', 'merge_radius', 'arc_spacing', 'min_region_area'):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f'TopologyConfig.{name}: expected a number >= 0, got {v!r}')
+        check_numbers(self, nonnegative=('min_clearance', 'ridge_ratio', 'spur_factor',
+                                         'weak_spur_factor', 'min_spur_length', 'merge_radius',
+                                         'arc_spacing', 'min_region_area'))
         if not 0 <= self.free_thresh <= 100:
             raise ValueError(f'TopologyConfig.free_thresh: expected 0..100, got '
                              f'{self.free_thresh!r}')
@@ -69,10 +67,7 @@ class IndexConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.beams, int) or isinstance(self.beams, bool) or self.beams < 8:
             raise ValueError(f'IndexConfig.beams: expected an integer >= 8, got {self.beams!r}')
-        if not (isinstance(self.max_range, (int, float)) and self.max_range > 0
-                and math.isfinite(self.max_range)):
-            raise ValueError(f'IndexConfig.max_range: expected a number > 0, got '
-                             f'{self.max_range!r}')
+        check_numbers(self, positive=('max_range',))
         pose = tuple(float(v) for v in self.sensor_pose)
         if len(pose) != 3 or not all(map(math.isfinite, pose)):
             raise ValueError(f'IndexConfig.sensor_pose: expected finite (x, y, yaw), got '
@@ -97,13 +92,8 @@ class MapBuildConfig:
     chunk_beams: int = param(20000, 'beams traversed per vectorized batch')
 
     def __post_init__(self) -> None:
-        for name, low, strict in (('resolution', 0.0, True), ('margin', 0.0, False),
-                                  ('max_range', 0.0, True), ('free_cap', 0.0, False)):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v)
-                    and (v > low if strict else v >= low)):
-                raise ValueError(f'MapBuildConfig.{name}: expected a number '
-                                 f'{">" if strict else ">="} {low:g}, got {v!r}')
+        check_numbers(self, positive=('resolution', 'max_range'),
+                      nonnegative=('margin', 'free_cap'))
         if not (isinstance(self.occupied_ratio, (int, float))
                 and 0.0 <= self.occupied_ratio <= 1.0):
             raise ValueError(f'MapBuildConfig.occupied_ratio: expected 0..1, got '

@@ -21,7 +21,7 @@ import json
 import math
 from pathlib import Path
 import typing
-from typing import Any, TypeVar
+from typing import Any, NamedTuple, TypeVar
 
 from .localization import LocalizerConfig
 from .mapping import IndexConfig, TopologyConfig
@@ -211,8 +211,16 @@ def _node_params(data: dict, node: str) -> dict:
     return section
 
 
-def load_configs(path: str | Path | None, node: str = 'global_localizer'):
-    """``(IndexConfig, LocalizerConfig)`` from a params file (defaults where absent)."""
+class Configs(NamedTuple):
+    """The configs of the ``global_localizer`` node's params: index, localizer, tracker."""
+
+    index: IndexConfig
+    localizer: LocalizerConfig
+    tracker: TrackerConfig
+
+
+def load_all_configs(path: str | Path | None, node: str = 'global_localizer') -> Configs:
+    """Return the index, localizer and tracker configs of a params file, read once."""
     data = load_yaml_mapping(path) if path else {}
     try:
         section = _node_params(data, node)
@@ -222,19 +230,21 @@ def load_configs(path: str | Path | None, node: str = 'global_localizer'):
         if pose is not None:    # the laser pose on the base feeds both configs
             index_cfg = dataclasses.replace(index_cfg, sensor_pose=pose)
             loc_cfg = dataclasses.replace(loc_cfg, laser_pose=pose)
+        track_cfg = from_dict(TrackerConfig, section.get('tracker'), 'tracker.')
     except (TypeError, ValueError) as exc:
         raise ValueError(f'{path}: {exc}') from None
-    return index_cfg, loc_cfg
+    return Configs(index_cfg, loc_cfg, track_cfg)
+
+
+def load_configs(path: str | Path | None, node: str = 'global_localizer'):
+    """``(IndexConfig, LocalizerConfig)`` from a params file (defaults where absent)."""
+    return load_all_configs(path, node)[:2]
 
 
 def load_tracker_config(path: str | Path | None,
                         node: str = 'global_localizer') -> TrackerConfig:
     """Return the :class:`TrackerConfig` of a params file's ``tracker`` section (or defaults)."""
-    data = load_yaml_mapping(path) if path else {}
-    try:
-        return from_dict(TrackerConfig, _node_params(data, node).get('tracker'), 'tracker.')
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{path}: {exc}') from None
+    return load_all_configs(path, node).tracker
 
 
 def load_index_config(path: str | Path) -> IndexConfig:

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 import math
 
-from .fields import param
+from .fields import check_numbers, param
 
 #: fields that must be > 0 (the rest must be >= 0); tuples are checked element by element
 _POSITIVE = {'min_step_std', 'no_odom_std', 'max_odom_step', 'window_sigmas', 'window_xy',
@@ -82,14 +82,9 @@ class TrackerConfig:
         'tracker is lost')
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            values = value if isinstance(value, tuple) else (value,)
-            least = 'positive' if f.name in _POSITIVE else 'non-negative'
-            if not all(isinstance(v, (int, float)) and math.isfinite(v)
-                       and (v > 0 if f.name in _POSITIVE else v >= 0) for v in values):
-                raise ValueError(f'TrackerConfig.{f.name} must be {least} and finite, got '
-                                 f'{value!r}')
+        names = [f.name for f in fields(self)]
+        check_numbers(self, [n for n in names if n in _POSITIVE],
+                      [n for n in names if n not in _POSITIVE])
         for name in ('window_xy', 'window_yaw'):
             if getattr(self, name)[0] > getattr(self, name)[1]:
                 raise ValueError(f'TrackerConfig.{name} must be (min, max) with min <= max, got '

@@ -124,9 +124,9 @@ def plot_track(grid, rows, path, kidnaps=(), title: str = '') -> None:
         if len(sel):
             ax.plot(sel[:, 0], sel[:, 1], marker, color=color, ms=4, ls='none',
                     label=f'{mode} ({len(sel)})')
-    wrong = [r for r in rows if r.status == 'ok' and r.has_truth and not r.correct]
-    for r in wrong:
-        ax.plot([r.x, r.gt_x], [r.y, r.gt_y], color='tab:red', lw=1.0)
+    for r in rows:
+        if r.wrong:         # a confident wrong answer: a line to the truth
+            ax.plot([r.x, r.gt_x], [r.y, r.gt_y], color='tab:red', lw=1.0)
     ax.set_title(title or 'tracking')
     ax.set_aspect('equal')
     ax.legend(loc='upper right', fontsize=8)

@@ -1,6 +1,7 @@
 """Offline replay: localize every scan of a bag on its own and score it against /ground_truth."""
 from __future__ import annotations
 
+from collections import Counter
 import csv
 from dataclasses import asdict, dataclass, fields
 import math
@@ -17,6 +18,26 @@ from ..transforms import Pose2, wrap_angle
 #: success: status ok and within these bounds of the ground truth (the issue's definition)
 SUCCESS_XY = 0.5
 SUCCESS_YAW = math.radians(5.0)
+
+
+def within_success(pose: Pose2 | None, truth: Pose2) -> bool:
+    """Return whether ``pose`` lies within the success bounds of ``truth`` (False: None, NaN)."""
+    return (pose is not None
+            and math.hypot(pose[0] - truth[0], pose[1] - truth[1]) <= SUCCESS_XY
+            and abs(float(wrap_angle(pose[2] - truth[2]))) <= SUCCESS_YAW)
+
+
+def status_counts(rows: Sequence) -> tuple[int, int, int]:
+    """Return how many ``rows`` (or results) are ``ok``, ``ambiguous`` and ``failed``."""
+    counts = Counter(r.status for r in rows)
+    return counts['ok'], counts['ambiguous'], counts['failed']
+
+
+def latency_percentiles(values: Sequence[float]) -> tuple[float, float]:
+    """Return the p50 and p95 of ``values`` (NaN for none)."""
+    if not len(values):
+        return math.nan, math.nan
+    return float(np.percentile(values, 50)), float(np.percentile(values, 95))
 
 
 @dataclass
@@ -36,13 +57,19 @@ class ResultRow:
     gt_yaw: float = math.nan
 
     @classmethod
-    def from_localization(cls, stamp: float, loc: Localization,
-                          truth: Pose2 | None) -> 'ResultRow':
+    def from_localization(cls, stamp: float, loc: Localization, truth: Pose2 | None,
+                          **columns) -> 'ResultRow':
+        """
+        Return the row of ``loc`` and its ground truth (None: unknown).
+
+        ``loc``: a Localization or a result with the same pose, status, latency_ms, node and
+        score; ``columns`` fill a subclass's further columns.
+        """
         pose = loc.pose if loc.pose is not None else (math.nan, math.nan, math.nan)
         gt = truth if truth is not None else (math.nan, math.nan, math.nan)
         return cls(stamp=stamp, x=pose[0], y=pose[1], yaw=pose[2], status=loc.status,
                    latency_ms=loc.latency_ms, node=loc.node, score=loc.score,
-                   gt_x=gt[0], gt_y=gt[1], gt_yaw=gt[2])
+                   gt_x=gt[0], gt_y=gt[1], gt_yaw=gt[2], **columns)
 
     @property
     def has_truth(self) -> bool:
@@ -55,8 +82,18 @@ class ResultRow:
 
     @property
     def correct(self) -> bool:
-        ex, ey, eyaw = self.errors()
-        return bool(math.hypot(ex, ey) <= SUCCESS_XY and eyaw <= SUCCESS_YAW)
+        """Within the success bounds of the ground truth (whatever the status)."""
+        return within_success((self.x, self.y, self.yaw), (self.gt_x, self.gt_y, self.gt_yaw))
+
+    @property
+    def right(self) -> bool:
+        """Answered ``ok`` and within the success bounds of the ground truth."""
+        return self.status == 'ok' and self.has_truth and self.correct
+
+    @property
+    def wrong(self) -> bool:
+        """Answered ``ok`` but outside the success bounds of the ground truth."""
+        return self.status == 'ok' and self.has_truth and not self.correct
 
 
 @dataclass(frozen=True)
@@ -98,12 +135,12 @@ def summarize(rows: Sequence[ResultRow]) -> Summary:
     ok = [r for r in rows if r.status == 'ok']
     correct = [r for r in ok if r.correct]
     err = np.array([r.errors() for r in ok]) if ok else np.full((1, 3), np.nan)
-    lat = np.array([r.latency_ms for r in rows])
+    _, ambiguous, failed = status_counts(rows)
+    p50, p95 = latency_percentiles([r.latency_ms for r in rows])
     nan_med = (lambda a: float(np.median(a))) if ok else (lambda a: math.nan)
     nan_mean = (lambda a: float(np.mean(a))) if ok else (lambda a: math.nan)
     return Summary(
-        n=len(rows), ok=len(ok), ambiguous=sum(r.status == 'ambiguous' for r in rows),
-        failed=sum(r.status == 'failed' for r in rows),
+        n=len(rows), ok=len(ok), ambiguous=ambiguous, failed=failed,
         success_rate=len(correct) / len(rows),
         precision=len(correct) / len(ok) if ok else math.nan,
         median_xy_mm=nan_med(np.hypot(err[:, 0], err[:, 1])) * 1e3,
@@ -111,7 +148,7 @@ def summarize(rows: Sequence[ResultRow]) -> Summary:
         median_yaw_deg=math.degrees(nan_med(err[:, 2])),
         mean_x_mm=nan_mean(err[:, 0]) * 1e3, mean_y_mm=nan_mean(err[:, 1]) * 1e3,
         mean_yaw_deg=math.degrees(nan_mean(err[:, 2])),
-        latency_p50_ms=float(np.percentile(lat, 50)), latency_p95_ms=float(np.percentile(lat, 95)))
+        latency_p50_ms=p50, latency_p95_ms=p95)
 
 
 def write_results_csv(rows: Iterable[ResultRow], path: str | Path) -> None:

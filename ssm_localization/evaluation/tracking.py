@@ -15,14 +15,17 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 import math
-from typing import Sequence
+from typing import Mapping, Sequence
 
-import numpy as np
 from tqdm import tqdm
 
-from .replay import ResultRow, summarize, Summary
+from .replay import latency_percentiles, ResultRow, status_counts, summarize, Summary
+from ..io.bag_records import stamp_to_ns
 from ..localization.tracker import Tracker, TrackResult
-from ..transforms import Pose2
+from ..transforms import Pose2, pose_at_time
+
+#: odometry further than this from a scan's stamp (s) is not used (the node's ``odom_max_age``)
+ODOM_MAX_AGE = 0.5
 
 
 @dataclass
@@ -33,16 +36,15 @@ class TrackRow(ResultRow):
 
     @classmethod
     def from_track(cls, stamp: float, res: TrackResult, truth: Pose2 | None) -> 'TrackRow':
-        pose = res.pose if res.pose is not None else (math.nan, math.nan, math.nan)
-        gt = truth if truth is not None else (math.nan, math.nan, math.nan)
-        return cls(stamp=stamp, x=pose[0], y=pose[1], yaw=pose[2], status=res.status,
-                   latency_ms=res.latency_ms, node=res.node, score=res.score, gt_x=gt[0],
-                   gt_y=gt[1], gt_yaw=gt[2], mode=res.mode)
+        return cls.from_localization(stamp, res, truth, mode=res.mode)
 
-    @property
-    def right(self) -> bool:
-        """Answered ``ok`` and within the success bounds of the ground truth."""
-        return self.status == 'ok' and self.has_truth and self.correct
+
+def odometry_at(stamps: Sequence[float], odom: Mapping[float, Pose2],
+                max_age: float = ODOM_MAX_AGE) -> list[Pose2 | None]:
+    """Return the odometry pose at each stamp (None: none close), as the node interpolates it."""
+    timed = sorted({stamp_to_ns(s): p for s, p in odom.items()}.items())
+    age = int(max_age * 1e9)
+    return [pose_at_time(timed, stamp_to_ns(t), age) for t in stamps]
 
 
 def track_scans(tracker: Tracker, scans: Sequence, odom: Sequence[Pose2 | None] | None = None,
@@ -160,20 +162,13 @@ def summarize_track(rows: Sequence[TrackRow],
     """
     use_truth = any(r.has_truth for r in rows)
     starts = list(kidnaps) if kidnaps is not None else detected_losses(rows)
+    ok, ambiguous, failed = status_counts(rows)
     return TrackSummary(
-        n=len(rows), ok=sum(r.status == 'ok' for r in rows),
-        ambiguous=sum(r.status == 'ambiguous' for r in rows),
-        failed=sum(r.status == 'failed' for r in rows),
+        n=len(rows), ok=ok, ambiguous=ambiguous, failed=failed,
         summary=summarize(rows) if use_truth else None,
         first_fix=recovery_after(rows, 0, use_truth),
         recoveries=[recovery_after(rows, k, use_truth) for k in starts],
         tracked=sum(r.mode == 'tracked' for r in rows),
         relocalized=sum(r.mode == 'relocalized' and r.status == 'ok' for r in rows),
-        latency=_percentiles([r.latency_ms for r in rows]),
-        tracked_latency=_percentiles([r.latency_ms for r in rows if r.mode == 'tracked']))
-
-
-def _percentiles(values: list[float]) -> tuple[float, float]:
-    if not values:
-        return math.nan, math.nan
-    return float(np.percentile(values, 50)), float(np.percentile(values, 95))
+        latency=latency_percentiles([r.latency_ms for r in rows]),
+        tracked_latency=latency_percentiles([r.latency_ms for r in rows if r.mode == 'tracked']))

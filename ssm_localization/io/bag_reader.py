@@ -17,7 +17,7 @@ import numpy as np
 from .bag_records import (BagData, BagError, GT_TOPIC, MAP_TOPIC, ODOM_TOPIC, SCAN_TOPIC,
                           SCAN_TYPE, ScanRecord, typestore)
 from ..files.yaml_input import load_yaml_file
-from ..mapping.map_io import occupancy_map_from_msg, OccupancyMap
+from ..mapping.map_io import occupancy_map_from_msg
 from ..mapping.map_limits import MAX_MAP_CELLS
 from ..progress import ProgressCallback
 from ..transforms import Pose2, quaternion_to_yaw
@@ -156,6 +156,8 @@ class _Reader:
                                        f'({type(exc).__name__}: {exc})') from None
             return
         conns = [c for c in self.reader.connections if c.topic in topics]
+        if not conns:       # rosbags reads every connection when given none
+            return
         it = self.reader.messages(connections=conns)
         n = 0
         while True:
@@ -182,19 +184,6 @@ def _scan_record(msg) -> ScanRecord:
                       frame_id=str(msg.header.frame_id))
 
 
-def _map_from_msg(msg, max_cells: int) -> OccupancyMap:
-    """
-    Convert OccupancyGrid -> OccupancyMap.
-
-    The float32 resolution is restored to its shortest decimal (0.05, not 0.0500000007) so the map
-    equals (and checksums like) the YAML it was made from. Maps of more than ``max_cells`` cells
-    (0: no limit) are refused before conversion.
-    """
-    m = occupancy_map_from_msg(msg, max_cells)
-    res = float(repr(np.float32(m.resolution)).removeprefix('np.float32(').rstrip(')'))
-    return OccupancyMap(m.data, res, m.origin, m.frame_id)
-
-
 def _progress_step(progress, n: int, total: int) -> None:
     if progress is not None and (n % 50 == 0 or n == total):
         progress(n, total, 'reading bag')
@@ -216,9 +205,13 @@ def iter_scans(path: str | Path, scan_topic: str = SCAN_TOPIC,
 
 def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
              progress: ProgressCallback | None = None, require_scans: bool = True,
-             max_map_cells: int = MAX_MAP_CELLS) -> BagData:
+             max_map_cells: int = MAX_MAP_CELLS, read_map: bool = True) -> BagData:
     """
-    Read a whole bag: the first /map, every scan, /ground_truth and /odom poses.
+    Read a whole bag: the first /map, every scan, the /ground_truth and /odom poses.
+
+    ``read_map=False`` skips /map (for a caller with a map of its own). The map's resolution and
+    origin are the shortest decimals of their float32 values (``map_io.canonical``), so it
+    checksums like the YAML it was made from.
 
     Raises ``FileNotFoundError`` for a missing path, ``BagError`` (a ``ValueError``) for a bag
     that cannot be opened or lacks ``scan_topic`` (unless ``require_scans=False``),
@@ -230,7 +223,7 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
     try:
         if require_scans:
             rd.check_topic(scan_topic, SCAN_TYPE)
-        topics = {scan_topic, MAP_TOPIC, GT_TOPIC, ODOM_TOPIC}
+        topics = {scan_topic, GT_TOPIC, ODOM_TOPIC} | ({MAP_TOPIC} if read_map else set())
         total = sum(rd.counts.get(t, 0) for t in topics)
         occ_map, scans, gt, od = None, [], {}, {}
         for n, (topic, msg) in enumerate(rd.messages(topics), 1):
@@ -238,7 +231,7 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
                 scans.append(_scan_record(msg))
             elif topic == MAP_TOPIC and occ_map is None:
                 try:
-                    occ_map = _map_from_msg(msg, max_map_cells)
+                    occ_map = occupancy_map_from_msg(msg, max_map_cells)
                 except ValueError as exc:
                     raise type(exc)(f'{rd.path}: {MAP_TOPIC}: {exc}') from None
             elif topic == GT_TOPIC:

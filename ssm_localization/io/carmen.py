@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 import gzip
 from pathlib import Path
-import shutil
 from typing import Iterator, Sequence
 import zlib
 
@@ -26,7 +25,7 @@ from .bag_records import ScanRecord
 from .bag_writer import write_bag
 from ..config.mapping import MapBuildConfig
 from ..files.reading import clip, input_file
-from ..files.writing import check_output_dir, check_output_file
+from ..files.writing import atomic_dir, check_output_dir, check_output_file
 from ..mapping.grid import build_grid_map
 from ..mapping.map_io import OccupancyMap, save_map_yaml
 from ..mapping.map_limits import MAX_MAP_CELLS
@@ -298,7 +297,8 @@ def convert_carmen(log_path: str | Path, out_dir: str | Path, name: str | None =
     ``max_scans``). ``first``/``last`` restrict both to the scan index
     range ``[first, last)``; ``bag_path`` overrides the bag's location. Every output path is
     checked before the map is built; a map of more than ``max_map_cells`` cells (0: no limit) is
-    refused.
+    refused. The map is written before the bag is moved into place: when either fails, an existing
+    bag is left as it was.
     """
     out_dir = check_output_dir(out_dir, 'output directory')
     log = read_carmen_log(log_path)
@@ -316,14 +316,13 @@ def convert_carmen(log_path: str | Path, out_dir: str | Path, name: str | None =
         raise ValueError(f'{log_path}: no query scans selected')
     occ_map = build_map(log, m_idx, config, progress=progress, max_cells=max_map_cells)
     bag = None
-    if write_queries:     # the bag, then the map; when the map fails the new bag goes too
-        bag = write_log_bag(log, q_idx, bag_path, occ_map, with_odom, overwrite, progress)
-    try:
+    if write_queries:     # the map is written inside the bag's stage: either fails, no bag moves
+        with atomic_dir(bag_path, 'bag', overwrite) as stage:
+            write_log_bag(log, q_idx, stage, occ_map, with_odom, progress=progress)
+            save_map_yaml(occ_map, map_yaml)
+        bag = bag_path
+    else:
         save_map_yaml(occ_map, map_yaml)
-    except BaseException:
-        if bag is not None:
-            shutil.rmtree(bag, ignore_errors=True)
-        raise
     return ConversionResult(map_yaml=map_yaml, bag=bag, map_scans=int(m_idx.size),
                             query_scans=int(q_idx.size) if write_queries else 0,
                             map_shape=occ_map.shape)

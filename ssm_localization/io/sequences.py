@@ -7,7 +7,8 @@ Scan sequences with odometry for tracking benchmarks and bags (issue 11's protoc
   robot's odometry is);
 - kidnap sequences spliced from it: ``segments`` pieces of ``n / 5`` consecutive scans taken at
   ``0, 2n/5, 4n/5`` (by default), the odometry continuing across each jump as a small forward
-  step, so odometry does not reveal the kidnap while the ground truth jumps.
+  step, so odometry does not reveal the kidnap while the ground truth jumps;
+- single kidnaps (:func:`splice_kidnaps`): five scans before a jump, four after.
 """
 from __future__ import annotations
 
@@ -25,6 +26,9 @@ from ..transforms import compose, inverse, Pose2
 ODOM_OFFSET: Pose2 = (-13.7, 4.2, 2.1)
 #: the odometry increment across a kidnap: a small step forward
 KIDNAP_STEP: Pose2 = (0.1, 0.0, 0.0)
+#: scans tracked around a single kidnap: up to the scan before it (inclusive), from the one after
+KIDNAP_BEFORE = 5
+KIDNAP_AFTER = 4
 
 
 @dataclass(frozen=True)
@@ -129,3 +133,17 @@ def splice(seq: ScanSequence, segments: Sequence[tuple[int, int]],
             truth.append(seq.truth[k])
     return ScanSequence(name=name or f'{seq.name}_spliced', scans=scans, odom=odom, truth=truth,
                         kidnaps=kidnaps)
+
+
+def splice_kidnaps(seq: ScanSequence, kidnaps: Sequence[tuple[int, int]],
+                   name: str | None = None) -> ScanSequence:
+    """
+    Splice single kidnaps of ``seq``: for each ``(before, after)`` pair of scan indices.
+
+    ``KIDNAP_BEFORE`` scans up to ``before`` inclusive, then ``KIDNAP_AFTER`` from ``after``
+    (:func:`splice`: the odometry steps by ``KIDNAP_STEP`` across each join).
+    """
+    segments = []
+    for before, after in kidnaps:
+        segments += [(before - KIDNAP_BEFORE + 1, before + 1), (after, after + KIDNAP_AFTER)]
+    return splice(seq, segments, name=name)

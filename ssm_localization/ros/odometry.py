@@ -22,8 +22,8 @@ from geometry_msgs.msg import TransformStamped
 from rclpy.duration import Duration
 from rclpy.time import Time
 from ssm_localization.ros.conversions import pose_from_msg, stamp_to_ns, time_msg
-from ssm_localization.transforms import (compose, inverse, Pose2, quaternion_to_yaw, wrap_angle,
-                                         yaw_to_quaternion)
+from ssm_localization.transforms import (compose, inverse, Pose2, pose_at_time,
+                                         quaternion_to_yaw, yaw_to_quaternion)
 
 try:  # optional: any real ROS 2 install has it, the PyPI wheels do not
     import tf2_ros
@@ -65,26 +65,9 @@ class OdometryBuffer:
 
     def pose_at(self, stamp: Any) -> Pose2 | None:
         """Return the odometry pose at ``stamp`` (interpolated), or None when none is close."""
-        t = stamp_to_ns(stamp)
         with self._lock:
             poses = list(self._poses)
-        if not poses:
-            return None
-        after = next((k for k, (s, _) in enumerate(poses) if s >= t), None)
-        if after is not None and poses[after][0] == t:
-            return poses[after][1]
-        if after is not None and after > 0:
-            (s0, p0), (s1, p1) = poses[after - 1], poses[after]
-            if s1 - s0 <= 2 * self.max_age_ns:
-                return interpolate(p0, p1, (t - s0) / (s1 - s0))
-        near = min(poses, key=lambda sp: abs(sp[0] - t))
-        return near[1] if abs(near[0] - t) <= self.max_age_ns else None
-
-
-def interpolate(a: Pose2, b: Pose2, f: float) -> Pose2:
-    """Return the pose a fraction ``f`` of the way from ``a`` to ``b`` (yaw the short way)."""
-    return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]),
-            float(wrap_angle(a[2] + f * float(wrap_angle(b[2] - a[2])))))
+        return pose_at_time(poses, stamp_to_ns(stamp), self.max_age_ns)
 
 
 class OdometrySource:
