@@ -60,7 +60,8 @@ from ssm_localization.ros.lifecycle import (answer_invalid_transitions, configur
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.odometry import MapOdomBroadcaster, OdometryBuffer, OdometrySource
 from ssm_localization.ros.parameter_guard import ParameterGuard
-from ssm_localization.ros.parameters import (build_config, DYNAMIC, laser_pose_of,
+from ssm_localization.ros.parameters import (build_config, config_problem, DYNAMIC,
+                                             laser_pose_of, LOCALIZER_CONFIGS,
                                              localizer_parameters)
 from ssm_localization.ros.qos import LATCHED_QOS, SERVICE_QOS
 from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox
@@ -86,18 +87,6 @@ def format_result(loc: Any) -> str:
             f'score={float(loc.score):.3f} latency_ms={float(loc.latency_ms):.1f}')
 
 
-def check_configs(values: dict[str, Any]) -> str | None:
-    """Why the core refuses the index / localizer config of these values, or None."""
-    pose = laser_pose_of(values)
-    for cls, prefix in ((IndexConfig, 'index'), (LocalizerConfig, 'localizer'),
-                        (TrackerConfig, 'tracker')):
-        try:
-            build_config(cls, prefix, values, pose)
-        except (ValueError, TypeError) as exc:
-            return f'invalid {prefix}.* parameters: {exc}'
-    return None
-
-
 class GlobalLocalizerNode(LifecycleNode):
     """Global localization of single laser scans against the topological index of a map."""
 
@@ -105,7 +94,8 @@ class GlobalLocalizerNode(LifecycleNode):
         super().__init__('global_localizer', **kwargs)
         answer_invalid_transitions(self)
         self._guard = ParameterGuard(self, localizer_parameters(), DYNAMIC, {'mode': MODES},
-                                     partial(configured_state, self), check_configs)
+                                     partial(configured_state, self),
+                                     partial(config_problem, LOCALIZER_CONFIGS))
         values = self._guard.declare()
         self._group = ReentrantCallbackGroup()
         self._mailbox = ScanMailbox()
