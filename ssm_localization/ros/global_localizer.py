@@ -164,8 +164,8 @@ class GlobalLocalizerNode(LifecycleNode):
                                     self._on_index_error)
         self.source = IndexSource(
             self.builder, self.get_logger(), index_path, self.resolve_topic_name('map'),
-            load_index, self._build, self._make_served, save_index, self._on_ready,
-            self._on_frame)
+            partial(load_index, max_cells=self.max_map_cells), self._build, self._make_served,
+            save_index, self._on_ready, self._on_frame)
         self.source.start()      # before the map subscription: a latched map may come at once
         self._map_sub = self.create_subscription(OccupancyGrid, 'map', self._on_map,
                                                  LATCHED_QOS, callback_group=self._group)
@@ -315,7 +315,7 @@ class GlobalLocalizerNode(LifecycleNode):
             self.get_logger().warning(f'{source} was built with the laser at {sensor} on the '
                                       f'base, the laser_* parameters say {self.laser_pose}')
         localizer = GlobalLocalizer(index, self.localizer_config)
-        return ServedIndex(index, localizer, index.map.checksum(), source,
+        return ServedIndex(index, localizer, index.map_checksum, source,
                            getattr(index.map, 'frame_id', '') or '')
 
     def _on_index_done(self, result, label: str) -> None:
