@@ -7,6 +7,7 @@ scan on ``odom`` and ``scan``, and the ``global_pose`` stream is checked against
 """
 from __future__ import annotations
 
+import copy
 import math
 import time
 
@@ -151,6 +152,29 @@ def test_track_mode_takes_initialpose_and_the_service_answer_as_prior(ros, bag):
     last = node.node._last
     assert last.status == 'ok' and last.message.startswith('tracked'), last.message
     assert _right(last.pose, truth[12])
+
+
+def test_a_new_map_frame_does_not_restart_the_track(ros, bag, capfd):
+    """The same map in another frame keeps the tracker and its laser-mount localizer."""
+    grid, scans, odom, _, _ = bag
+
+    def in_base_frame(scan):
+        msg = copy.deepcopy(scan)
+        msg.header.frame_id = 'base_link'      # mount (0, 0, 0), not laser_x: a variant
+        return msg
+    node = TrackingNode(ros, laser_x=0.1)
+    assert node.ready(grid)
+    node.step(in_base_frame(scans[0].msg), odom[scans[0].stamp])
+    session = node.node.session
+    tracker = session._tracker
+    assert tracker is not None and tracker.localizer is not node.node.source.served.localizer
+    moved = copy.deepcopy(grid)
+    moved.header.frame_id = 'world'
+    node.map_pub.publish(moved)
+    assert ros.wait_for(lambda: node.node._marks_frame == 'world', 10)   # markers redrawn
+    node.step(in_base_frame(scans[1].msg), odom[scans[1].stamp])
+    assert session._tracker is tracker
+    assert 'laser mount changed' not in capfd.readouterr().err
 
 
 def test_track_mode_parameters_are_checked(ros):

@@ -107,7 +107,6 @@ class GlobalLocalizerNode(LifecycleNode):
         self._index_marks: list = []
         self._marks_frame = ''
         self._last_markers = 0.0
-        self._variants: dict[tuple, GlobalLocalizer] = {}
         self._configured_parts = False
         self._workers: list[threading.Thread] = []
         self._track_subs: list = []
@@ -260,7 +259,7 @@ class GlobalLocalizerNode(LifecycleNode):
                     self.diagnostics_pub):
             self.destroy_lifecycle_publisher(pub)
         with self._state_lock:
-            self._last, self._index_marks, self._variants = None, [], {}
+            self._last, self._index_marks = None, []
 
     def _start_worker(self, target, name: str) -> None:
         worker = threading.Thread(target=target, name=name, daemon=True)
@@ -343,7 +342,7 @@ class GlobalLocalizerNode(LifecycleNode):
         stamp = self._now_ns()
         marks = markers.index_markers(served.index, frame, stamp, self.max_gvd_points)
         with self._state_lock:
-            self._index_marks, self._marks_frame, self._variants = marks, frame, {}
+            self._index_marks, self._marks_frame = marks, frame
         if self._active and self.get_parameter('publish_markers').value:
             self.marker_pub.publish(markers.marker_array(marks, frame, stamp))
 
@@ -383,9 +382,9 @@ class GlobalLocalizerNode(LifecycleNode):
         if all(abs(a - b) < 1e-9 for a, b in zip(pose, served.localizer.config.laser_pose)):
             return served.localizer
         with self._state_lock:
-            variant = self._variants.get(pose)
-            if variant is None or variant.index is not served.index:
-                variant = self._variants[pose] = served.localizer.with_laser_pose(pose)
+            variant = served.variants.get(pose)
+            if variant is None:
+                variant = served.variants[pose] = served.localizer.with_laser_pose(pose)
         return variant
 
     def _prepare(self, msg: LaserScan) -> tuple[ScanArgs, LaserMount] | str:
