@@ -276,10 +276,10 @@ class GlobalLocalizerNode(LifecycleNode):
 
     def _configure_tracking(self, values: dict[str, Any]) -> None:
         """Track mode: the tracker session, ``odom`` and ``initialpose``, the TF broadcaster."""
-        self.odom_frame = str(values['odom_frame']).lstrip('/')
+        odom_frame = str(values['odom_frame']).lstrip('/')
         buffer = OdometryBuffer(float(values['odom_max_age']))
-        odometry = OdometrySource(buffer, self.odom_frame, self.base_frame, self._laser.buffer)
-        broadcaster = MapOdomBroadcaster.for_node(self, self.odom_frame,
+        odometry = OdometrySource(buffer, odom_frame, self.base_frame, self._laser.buffer)
+        broadcaster = MapOdomBroadcaster.for_node(self, odom_frame,
                                                   float(values['transform_tolerance']))
         if broadcaster is None:
             self.get_logger().info('tf2_ros is not installed: map -> odom is not broadcast')
