@@ -7,6 +7,7 @@ scan on ``odom`` and ``scan``, and the ``global_pose`` stream is checked against
 """
 from __future__ import annotations
 
+import copy
 import math
 import time
 
@@ -77,12 +78,22 @@ class TrackingNode:
             while len(session.odometry.buffer) == have and time.monotonic() < end:
                 self.odom_pub.publish(odom)
                 time.sleep(0.02)
-        count = session.count
+        count, last = session.count, self.node._last
         end = time.monotonic() + timeout
         while session.count == count and time.monotonic() < end:
             self.scan_pub.publish(scan)
             self.ros.wait_for(lambda: session.count > count, 0.5)
         assert session.count > count, 'the scan was not tracked'
+        self.ros.wait_for(lambda: self.node._last is not last, 5.0)   # and its result stored
+
+    def settle(self, quiet: float = 0.5, timeout: float = 30.0) -> None:
+        """Wait until no scan was tracked for ``quiet`` s (scans still on their way)."""
+        session = self.node.session
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            count = session.count
+            if not self.ros.wait_for(lambda: session.count != count, quiet):
+                return
 
 
 @pytest.fixture(scope='module')
@@ -147,10 +158,34 @@ def test_track_mode_takes_initialpose_and_the_service_answer_as_prior(ros, bag):
         node.scan_pub.publish(scans[11].msg)
         time.sleep(0.05)
     assert future.result().success, future.result().message
+    node.settle()                      # scan 11, sent again and again, is not taken for scan 12
     node.step(scans[12].msg, odom[scans[12].stamp])
     last = node.node._last
     assert last.status == 'ok' and last.message.startswith('tracked'), last.message
     assert _right(last.pose, truth[12])
+
+
+def test_a_new_map_frame_does_not_restart_the_track(ros, bag, capfd):
+    """The same map in another frame keeps the tracker and its laser-mount localizer."""
+    grid, scans, odom, _, _ = bag
+
+    def in_base_frame(scan):
+        msg = copy.deepcopy(scan)
+        msg.header.frame_id = 'base_link'      # mount (0, 0, 0), not laser_x: a variant
+        return msg
+    node = TrackingNode(ros, laser_x=0.1)
+    assert node.ready(grid)
+    node.step(in_base_frame(scans[0].msg), odom[scans[0].stamp])
+    session = node.node.session
+    tracker = session._tracker
+    assert tracker is not None and tracker.localizer is not node.node.source.served.localizer
+    moved = copy.deepcopy(grid)
+    moved.header.frame_id = 'world'
+    node.map_pub.publish(moved)
+    assert ros.wait_for(lambda: node.node._marks_frame == 'world', 10)   # markers redrawn
+    node.step(in_base_frame(scans[1].msg), odom[scans[1].stamp])
+    assert session._tracker is tracker
+    assert 'laser mount changed' not in capfd.readouterr().err
 
 
 def test_track_mode_parameters_are_checked(ros):

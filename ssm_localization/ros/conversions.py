@@ -142,6 +142,32 @@ def pose_from_msg(msg: Pose) -> tuple[float, float, float]:
     return (float(msg.position.x), float(msg.position.y), quaternion_to_yaw(q.x, q.y, q.z, q.w))
 
 
+def unit_quaternion(q: Any) -> tuple[float, float, float, float]:
+    """
+    Return ``(x, y, z, w)`` of a geometry_msgs/Quaternion scaled to unit length.
+
+    ``ValueError`` for a non-finite or zero quaternion.
+    """
+    x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not math.isfinite(norm) or norm < 1e-9:
+        raise ValueError('transform with a non-finite or zero rotation / translation')
+    return x / norm, y / norm, z / norm, w / norm
+
+
+def transform_pose(transform: Any) -> tuple[float, float, float]:
+    """
+    Return the planar pose (x, y, yaw) of a geometry_msgs/Transform.
+
+    The yaw is that of the rotated x axis projected on the plane (the rotation normalised
+    first). ``ValueError`` for a non-finite translation or a non-finite / zero rotation.
+    """
+    t = transform.translation
+    if not all(math.isfinite(v) for v in (t.x, t.y, t.z)):
+        raise ValueError('transform with a non-finite or zero rotation / translation')
+    return (float(t.x), float(t.y), quaternion_to_yaw(*unit_quaternion(transform.rotation)))
+
+
 def pose_stamped(pose, stamp: Any, frame_id: str) -> PoseStamped:
     msg = PoseStamped()
     msg.header.stamp = time_msg(stamp)

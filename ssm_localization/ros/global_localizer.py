@@ -34,7 +34,7 @@ import math
 from pathlib import Path
 import threading
 import time
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
@@ -45,6 +45,7 @@ from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from ssm_localization.config import IndexConfig, LocalizerConfig, TrackerConfig
 from ssm_localization.localization.localizer import GlobalLocalizer
+from ssm_localization.localization.tracker import TrackResult
 from ssm_localization.mapping.index import build_index, load_index, save_index
 from ssm_localization.ros import markers
 from ssm_localization.ros.conversions import (pose_array, pose_with_covariance, scan_args_from_msg,
@@ -60,7 +61,8 @@ from ssm_localization.ros.lifecycle import (answer_invalid_transitions, configur
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.odometry import MapOdomBroadcaster, OdometryBuffer, OdometrySource
 from ssm_localization.ros.parameter_guard import ParameterGuard
-from ssm_localization.ros.parameters import (build_config, DYNAMIC, laser_pose_of,
+from ssm_localization.ros.parameters import (build_config, config_problem, DYNAMIC,
+                                             laser_pose_of, LOCALIZER_CONFIGS,
                                              localizer_parameters)
 from ssm_localization.ros.qos import LATCHED_QOS, SERVICE_QOS
 from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox
@@ -86,18 +88,6 @@ def format_result(loc: Any) -> str:
             f'score={float(loc.score):.3f} latency_ms={float(loc.latency_ms):.1f}')
 
 
-def check_configs(values: dict[str, Any]) -> str | None:
-    """Why the core refuses the index / localizer config of these values, or None."""
-    pose = laser_pose_of(values)
-    for cls, prefix in ((IndexConfig, 'index'), (LocalizerConfig, 'localizer'),
-                        (TrackerConfig, 'tracker')):
-        try:
-            build_config(cls, prefix, values, pose)
-        except (ValueError, TypeError) as exc:
-            return f'invalid {prefix}.* parameters: {exc}'
-    return None
-
-
 class GlobalLocalizerNode(LifecycleNode):
     """Global localization of single laser scans against the topological index of a map."""
 
@@ -105,7 +95,8 @@ class GlobalLocalizerNode(LifecycleNode):
         super().__init__('global_localizer', **kwargs)
         answer_invalid_transitions(self)
         self._guard = ParameterGuard(self, localizer_parameters(), DYNAMIC, {'mode': MODES},
-                                     partial(configured_state, self), check_configs)
+                                     partial(configured_state, self),
+                                     partial(config_problem, LOCALIZER_CONFIGS))
         values = self._guard.declare()
         self._group = ReentrantCallbackGroup()
         self._mailbox = ScanMailbox()
@@ -117,7 +108,6 @@ class GlobalLocalizerNode(LifecycleNode):
         self._index_marks: list = []
         self._marks_frame = ''
         self._last_markers = 0.0
-        self._variants: dict[tuple, GlobalLocalizer] = {}
         self._configured_parts = False
         self._workers: list[threading.Thread] = []
         self._track_subs: list = []
@@ -174,8 +164,8 @@ class GlobalLocalizerNode(LifecycleNode):
                                     self._on_index_error)
         self.source = IndexSource(
             self.builder, self.get_logger(), index_path, self.resolve_topic_name('map'),
-            load_index, self._build, self._make_served, save_index, self._on_ready,
-            self._on_frame)
+            partial(load_index, max_cells=self.max_map_cells), self._build, self._make_served,
+            save_index, self._on_ready, self._on_frame)
         self.source.start()      # before the map subscription: a latched map may come at once
         self._map_sub = self.create_subscription(OccupancyGrid, 'map', self._on_map,
                                                  LATCHED_QOS, callback_group=self._group)
@@ -270,7 +260,7 @@ class GlobalLocalizerNode(LifecycleNode):
                     self.diagnostics_pub):
             self.destroy_lifecycle_publisher(pub)
         with self._state_lock:
-            self._last, self._index_marks, self._variants = None, [], {}
+            self._last, self._index_marks = None, []
 
     def _start_worker(self, target, name: str) -> None:
         worker = threading.Thread(target=target, name=name, daemon=True)
@@ -286,10 +276,10 @@ class GlobalLocalizerNode(LifecycleNode):
 
     def _configure_tracking(self, values: dict[str, Any]) -> None:
         """Track mode: the tracker session, ``odom`` and ``initialpose``, the TF broadcaster."""
-        self.odom_frame = str(values['odom_frame']).lstrip('/')
+        odom_frame = str(values['odom_frame']).lstrip('/')
         buffer = OdometryBuffer(float(values['odom_max_age']))
-        odometry = OdometrySource(buffer, self.odom_frame, self.base_frame, self._laser.buffer)
-        broadcaster = MapOdomBroadcaster.for_node(self, self.odom_frame,
+        odometry = OdometrySource(buffer, odom_frame, self.base_frame, self._laser.buffer)
+        broadcaster = MapOdomBroadcaster.for_node(self, odom_frame,
                                                   float(values['transform_tolerance']))
         if broadcaster is None:
             self.get_logger().info('tf2_ros is not installed: map -> odom is not broadcast')
@@ -325,7 +315,7 @@ class GlobalLocalizerNode(LifecycleNode):
             self.get_logger().warning(f'{source} was built with the laser at {sensor} on the '
                                       f'base, the laser_* parameters say {self.laser_pose}')
         localizer = GlobalLocalizer(index, self.localizer_config)
-        return ServedIndex(index, localizer, index.map.checksum(), source,
+        return ServedIndex(index, localizer, index.map_checksum, source,
                            getattr(index.map, 'frame_id', '') or '')
 
     def _on_index_done(self, result, label: str) -> None:
@@ -353,7 +343,7 @@ class GlobalLocalizerNode(LifecycleNode):
         stamp = self._now_ns()
         marks = markers.index_markers(served.index, frame, stamp, self.max_gvd_points)
         with self._state_lock:
-            self._index_marks, self._marks_frame, self._variants = marks, frame, {}
+            self._index_marks, self._marks_frame = marks, frame
         if self._active and self.get_parameter('publish_markers').value:
             self.marker_pub.publish(markers.marker_array(marks, frame, stamp))
 
@@ -393,9 +383,9 @@ class GlobalLocalizerNode(LifecycleNode):
         if all(abs(a - b) < 1e-9 for a, b in zip(pose, served.localizer.config.laser_pose)):
             return served.localizer
         with self._state_lock:
-            variant = self._variants.get(pose)
-            if variant is None or variant.index is not served.index:
-                variant = self._variants[pose] = served.localizer.with_laser_pose(pose)
+            variant = served.variants.get(pose)
+            if variant is None:
+                variant = served.variants[pose] = served.localizer.with_laser_pose(pose)
         return variant
 
     def _prepare(self, msg: LaserScan) -> tuple[ScanArgs, LaserMount] | str:
@@ -418,36 +408,24 @@ class GlobalLocalizerNode(LifecycleNode):
                                       'localizing the scan as given', once=True)
         return args, mount
 
-    def track_msg(self, msg: LaserScan) -> Any:
-        """Track one scan (track mode) and publish; return the TrackResult, or None if skipped."""
-        if self._not_ready() or self.session is None:
-            return None
-        served = self.source.served
-        prepared = self._prepare(msg)
-        if isinstance(prepared, str):
-            return None
-        args, mount = prepared
-        localizer = self._localizer_for(served, mount)
-        with self._localize_lock:
-            try:
-                result = self.session.track(localizer, args, msg.header.stamp,
-                                            self._frame(served),
-                                            bool(self.get_parameter('publish_tf').value))
-            except Exception as exc:  # noqa: BLE001 - a bad scan must not kill the node
-                self.get_logger().warning(f'tracking error: {type(exc).__name__}: {exc}')
-                return None
-        self._publish_result(result.as_localization(), msg, args, mount, served, False)
-        if result.mode != 'tracked':
-            self.get_logger().info(f'track: {result.mode}, {result.status}: {result.message}',
-                                   throttle_duration_sec=1.0)
-        return result
-
-    def localize_msg(self, msg: LaserScan, verbose: bool = True) -> tuple[Any, str | None]:
-        """Localize one scan and publish; ``(Localization | None, reason | None)``."""
+    def _ready(self) -> ServedIndex | str:
+        """Return the index served now, or why nothing can be localized."""
         reason = self._not_ready()
-        if reason:
-            return None, reason
         served = self.source.served
+        if reason is None and served is None:
+            reason = 'no map/index yet'
+        return reason or served
+
+    def _process(self, msg: LaserScan, served: ServedIndex, verbose: bool,
+                 run: Callable[[GlobalLocalizer, ScanArgs], Any],
+                 what: str = 'localization') -> tuple[Any, str | None]:
+        """
+        Localize (or track) one scan with ``served`` and publish.
+
+        ``run(localizer, args)`` returns the Localization (or TrackResult); it runs under the
+        localization lock. Returns ``(result | None, reason | None)``: the reason is None when
+        a pose was published.
+        """
         prepared = self._prepare(msg)
         if isinstance(prepared, str):
             return None, prepared
@@ -455,21 +433,42 @@ class GlobalLocalizerNode(LifecycleNode):
         localizer = self._localizer_for(served, mount)
         with self._localize_lock:
             try:
-                loc = localizer.localize_scan(*args.as_tuple())
+                result = run(localizer, args)
             except Exception as exc:  # noqa: BLE001 - a bad scan must not kill the node
-                self.get_logger().warning(f'localization error: {type(exc).__name__}: {exc}')
-                return None, f'localization error: {exc}'
-        self._publish_result(loc, msg, args, mount, served, verbose)
-        pose = loc.pose
-        if loc.status != 'ok' or pose is None or not all(math.isfinite(v) for v in pose):
-            text = f'{loc.status}: {loc.message}'
-            if verbose:
-                self.get_logger().warning(f'no pose published: {text}')
-            return loc, text
-        return loc, None
+                self.get_logger().warning(f'{what} error: {type(exc).__name__}: {exc}')
+                return None, f'{what} error: {exc}'
+        loc = result.as_localization() if isinstance(result, TrackResult) else result
+        if self._publish_result(loc, msg, args, mount, served, verbose):
+            return result, None
+        text = f'{loc.status}: {loc.message}'
+        if verbose:
+            self.get_logger().warning(f'no pose published: {text}')
+        return result, text
+
+    def _localize(self, msg: LaserScan, served: ServedIndex,
+                  verbose: bool) -> tuple[Any, str | None]:
+        """Localize one scan and publish; ``(Localization | None, reason | None)``."""
+        return self._process(msg, served, verbose,
+                             lambda localizer, args: localizer.localize_scan(*args.as_tuple()))
+
+    def _track(self, msg: LaserScan, served: ServedIndex) -> None:
+        """Track one scan (track mode) and publish."""
+        session = self.session
+        if session is None:
+            return
+        publish_tf = bool(self.get_parameter('publish_tf').value)
+        result, _ = self._process(
+            msg, served, False,
+            lambda localizer, args: session.track(localizer, args, msg.header.stamp,
+                                                  self._frame(served), publish_tf),
+            'tracking')
+        if result is not None and result.mode != 'tracked':
+            self.get_logger().info(f'track: {result.mode}, {result.status}: {result.message}',
+                                   throttle_duration_sec=1.0)
 
     def _publish_result(self, loc, msg: LaserScan, args: ScanArgs, mount: LaserMount,
-                        served: ServedIndex, verbose: bool) -> None:
+                        served: ServedIndex, verbose: bool) -> bool:
+        """Publish the candidates, markers and an ``ok`` finite pose; True when a pose was."""
         frame = self._frame(served)
         stamp = msg.header.stamp
         with self._state_lock:
@@ -486,7 +485,8 @@ class GlobalLocalizerNode(LifecycleNode):
                                                  mount.pose, served.index.node_xy)
             self.marker_pub.publish(markers.marker_array([*index_marks, *marks], frame, stamp))
         pose = loc.pose
-        if loc.status == 'ok' and pose is not None and all(math.isfinite(v) for v in pose):
+        published = loc.ok and pose is not None and all(math.isfinite(v) for v in pose)
+        if published:
             out = pose_with_covariance(loc, 0, frame)
             out.header.stamp = stamp
             self.pose_pub.publish(out)
@@ -496,13 +496,17 @@ class GlobalLocalizerNode(LifecycleNode):
             log(f'{self.base_frame} in {frame}: {format_result(loc)}')
         if verbose:
             self._publish_diagnostics()
+        return published
 
     # ------------------------------------------------------------------ services
     def _serve(self, msg: LaserScan) -> Answer:
-        loc, reason = self.localize_msg(msg, verbose=True)
+        served = self._ready()
+        if isinstance(served, str):
+            return Answer(False, served)
+        loc, reason = self._localize(msg, served, verbose=True)
         if reason is None and self.session is not None:
             self.session.set_prior(loc.pose, loc.covariance)    # the track goes on from there
-        return Answer(reason is None, format_result(loc) if reason is None else reason, loc)
+        return Answer(reason is None, format_result(loc) if reason is None else reason)
 
     def _no_scan_text(self, timeout: float) -> str:
         return f'no scan received on {self.resolve_topic_name("scan")} within {timeout:g} s'
@@ -537,8 +541,23 @@ class GlobalLocalizerNode(LifecycleNode):
 
     # ------------------------------------------------------------------ loops
     def _continuous_loop(self) -> None:
-        done = self._mailbox.seq
+        """Continuous mode: localize the newest scan, at most ``rate`` times a second."""
         period = 1.0 / self.rate if self.rate > 0 else 0.0
+        for msg, served in self._ready_scans('not localizing: {reason}', period):
+            loc, reason = self._localize(msg, served, verbose=False)
+            if reason and loc is not None:
+                self.get_logger().info(f'no pose: {reason}', throttle_duration_sec=2.0)
+
+    def _ready_scans(self, waiting: str,
+                     period: float = 0.0) -> Iterator[tuple[LaserScan, ServedIndex]]:
+        """
+        Yield the newest scan and the served index, again and again, when it can be localized.
+
+        Until the node stops; while it cannot localize, ``waiting`` (with ``{reason}``) is
+        logged now and then. With a ``period`` (s), a scan is taken at most that often (timed
+        from when the last one was taken; the scans in between are dropped).
+        """
+        done = self._mailbox.seq
         next_t = 0.0
         while not self._stop.is_set():
             if period and self._stop.wait(max(0.0, next_t - time.monotonic())):
@@ -548,44 +567,23 @@ class GlobalLocalizerNode(LifecycleNode):
                 continue
             msg, done = got
             next_t = time.monotonic() + period
-            reason = self._not_ready()
-            if reason:
-                self.get_logger().info(f'not localizing: {reason}', throttle_duration_sec=5.0)
+            served = self._ready()
+            if isinstance(served, str):
+                self.get_logger().info(waiting.format(reason=served), throttle_duration_sec=5.0)
                 continue
-            loc, reason = self.localize_msg(msg, verbose=False)
-            if reason and loc is not None:
-                self.get_logger().info(f'no pose: {reason}', throttle_duration_sec=2.0)
-
-    def _ready_scans(self, waiting: str) -> Iterator[LaserScan]:
-        """
-        Yield the newest scan, again and again, whenever the node can localize it.
-
-        Until the node stops; while it cannot localize, ``waiting`` (with ``{reason}``) is
-        logged now and then.
-        """
-        done = self._mailbox.seq
-        while not self._stop.is_set():
-            got = self._mailbox.wait_newer(done, None, self._stop)
-            if got is None:
-                continue
-            msg, done = got
-            reason = self._not_ready()
-            if reason:
-                self.get_logger().info(waiting.format(reason=reason), throttle_duration_sec=5.0)
-                continue
-            yield msg
+            yield msg, served
 
     def _track_loop(self) -> None:
         """Track mode: track the newest scan, again and again."""
-        for msg in self._ready_scans('not tracking: {reason}'):
-            self.track_msg(msg)
+        for msg, served in self._ready_scans('not tracking: {reason}'):
+            self._track(msg, served)
 
     def _startup_loop(self) -> None:
         """``localize_on_start``: localize incoming scans until the first ``ok`` pose."""
         self.get_logger().info('localize_on_start: localizing incoming scans until the first '
                                'ok pose')
-        for msg in self._ready_scans('localize_on_start: waiting ({reason})'):
-            loc, reason = self.localize_msg(msg, verbose=False)
+        for msg, served in self._ready_scans('localize_on_start: waiting ({reason})'):
+            loc, reason = self._localize(msg, served, verbose=False)
             if reason is None:
                 self.get_logger().info(f'localize_on_start: localized, {format_result(loc)}; '
                                        'on demand from now on')

@@ -14,9 +14,10 @@ class IndexBuilder:
     """
     Runs index jobs in one worker thread; the newest submitted job wins.
 
-    ``submit(label, job)`` queues ``job(progress) -> MapIndex``, replacing a queued job that has
-    not started; a running job is aborted at its next progress report (``Superseded``) or its
-    result is dropped. ``on_done(index, label)`` / ``on_error(exc, label)`` run in the worker.
+    ``submit(label, job, key)`` queues ``job(progress) -> MapIndex``, replacing a queued job
+    that has not started; a running job is aborted at its next progress report (``Superseded``)
+    or its result is dropped. :meth:`has_job` tells whether the job of a ``key`` is queued or
+    running. ``on_done(index, label)`` / ``on_error(exc, label)`` run in the worker.
     """
 
     def __init__(self, logger, on_done: Callable[[Any, str], None],
@@ -26,8 +27,9 @@ class IndexBuilder:
         self._on_error = on_error
         self._log_period = log_period
         self._cv = threading.Condition()
-        self._pending: tuple[str, Callable] | None = None
+        self._pending: tuple[str, Callable, Any] | None = None
         self._running: str | None = None
+        self._running_key: Any = None
         self._stop = False
         self._thread = threading.Thread(target=self._run, name='index_builder', daemon=True)
         self._thread.start()
@@ -41,13 +43,20 @@ class IndexBuilder:
         with self._cv:
             return self._running or (self._pending[0] if self._pending else 'idle')
 
-    def submit(self, label: str, job: Callable) -> None:
+    def has_job(self, key: Any) -> bool:
+        """Tell whether a job submitted with ``key`` (not None) is queued or running."""
+        with self._cv:
+            return key is not None and (
+                (self._pending is not None and self._pending[2] == key)
+                or (self._running is not None and self._running_key == key))
+
+    def submit(self, label: str, job: Callable, key: Any = None) -> None:
         with self._cv:
             if self._pending is not None:
                 self._logger.info(f'{label}: replaces the queued {self._pending[0]}')
             elif self._running is not None:
                 self._logger.info(f'{label}: supersedes {self._running} (in progress)')
-            self._pending = (label, job)
+            self._pending = (label, job, key)
             self._cv.notify_all()
 
     def wait_idle(self, timeout: float | None = None) -> bool:
@@ -72,8 +81,8 @@ class IndexBuilder:
                 self._cv.wait_for(lambda: self._pending is not None or self._stop)
                 if self._stop:
                     return
-                label, job = self._pending
-                self._pending, self._running = None, label
+                label, job, key = self._pending
+                self._pending, self._running, self._running_key = None, label, key
             t0 = time.monotonic()
             last = [t0, -1]
 
@@ -97,5 +106,5 @@ class IndexBuilder:
                 self._on_error(exc, label)
             finally:
                 with self._cv:
-                    self._running = None
+                    self._running, self._running_key = None, None
                     self._cv.notify_all()

@@ -18,13 +18,36 @@ The jobs run in the :class:`IndexBuilder` thread; callbacks ``on_ready(served)``
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 import threading
 from typing import Any, Callable
 
+from ssm_localization.mapping.index import save_index
+
 FILE = 'index file'
 MAP = 'map'
+
+
+def map_label(occ: Any, checksum: str) -> str:
+    """Name a map in the log: ``map WxH @ RES m (checksum[:8])``."""
+    return f'{MAP} {occ.width}x{occ.height} @ {occ.resolution:g} m ({checksum[:8]})'
+
+
+def write_index(index: Any, path: Path, log: Any,
+                save: Callable[[Any, Path], Any] = save_index) -> bool:
+    """
+    Write ``index`` to ``path`` with ``save`` (:func:`save_index`: atomic, makes the folders).
+
+    The outcome is logged; returns True when the file was written.
+    """
+    try:
+        save(index, path)
+    except (OSError, ValueError) as exc:
+        log.error(f'cannot write index file {path}: {exc}')
+        return False
+    log.info(f'index written to {path}')
+    return True
 
 
 @dataclass(frozen=True)
@@ -36,6 +59,9 @@ class ServedIndex:
     checksum: str         # OccupancyMap.checksum() of the map it was built for
     source: str           # 'index file PATH' or 'map topic'
     frame: str            # frame_id of that map
+    # localizers over ``index`` for other laser mounts ({mount pose: GlobalLocalizer}), kept
+    # with the index they use: dropped with it, kept when only the frame changes
+    variants: dict = field(default_factory=dict, compare=False, repr=False)
 
 
 class IndexSource:
@@ -44,7 +70,7 @@ class IndexSource:
 
     ``make(index, source) -> ServedIndex`` wraps a loaded / built index; ``load(path) -> index``
     and ``build(occupancy_map, progress) -> index`` do the work; ``save(index, path)`` writes
-    the file (errors are the caller's to log).
+    the file (:func:`write_index` logs its errors).
     """
 
     def __init__(self, builder: Any, logger: Any, index_path: Path | None, topic: str,
@@ -61,6 +87,7 @@ class IndexSource:
         self._lock = threading.Lock()
         self._served: ServedIndex | None = None
         self._topic_map: Any = None          # the newest usable map seen on the topic
+        self._topic_checksum = ''            # and its checksum
         self._file_pending = False
         self._pending_checksum: str | None = None
         self._save_to: Path | None = None
@@ -98,27 +125,26 @@ class IndexSource:
                 self._save_to = self._path
 
     def on_map(self, occ: Any) -> None:
-        """Return a usable map arrived on the topic."""
+        """Take a usable map arrived on the topic."""
+        checksum = occ.checksum()
         with self._lock:
-            self._topic_map = occ
+            self._topic_map, self._topic_checksum = occ, checksum
             waiting = self._file_pending
         if waiting:
             self._log.info(f'map on {self._topic} received while {self._path} loads: compared '
                            'with it once loaded')
             return
-        self._consider(occ)
+        self._consider(occ, checksum)
 
-    def _consider(self, occ: Any) -> None:
-        checksum = occ.checksum()
+    def _consider(self, occ: Any, checksum: str) -> None:
         frame = getattr(occ, 'frame_id', '') or ''
         with self._lock:
             served, pending = self._served, self._pending_checksum
             if served is not None and served.checksum == checksum and pending is None:
                 same_frame = served.frame == frame
                 if not same_frame:
-                    self._served = ServedIndex(served.index, served.localizer, checksum,
-                                               served.source, frame)
-            elif pending == checksum and checksum[:8] in self._builder.status():
+                    self._served = replace(served, frame=frame)
+            elif pending == checksum and self._builder.has_job((MAP, checksum)):
                 self._log.info('received the map being indexed again: nothing to do')
                 return
             else:
@@ -140,9 +166,10 @@ class IndexSource:
             self._log.warning(f'the map on {self._topic} ({checksum[:12]}) is not the map '
                               f'{self._path} was built for ({current.checksum[:12]}): '
                               'indexing the map topic; the index file will be rewritten')
-        label = (f'{MAP} {occ.width}x{occ.height} @ {occ.resolution:g} m ({checksum[:8]})')
+        label = map_label(occ, checksum)
         self._log.info(f'{label}: indexing')
-        self._builder.submit(label, lambda progress: (MAP, self._build(occ, progress)))
+        self._builder.submit(label, lambda progress: (MAP, self._build(occ, progress)),
+                             (MAP, checksum))
 
     # ------------------------------------------------------------------ builder callbacks
     def on_done(self, result: tuple[str, Any], label: str) -> None:
@@ -152,19 +179,18 @@ class IndexSource:
         if kind == FILE:
             with self._lock:
                 self._file_pending = False
-                topic_map = self._topic_map
-            if topic_map is not None and topic_map.checksum() != served.checksum:
+                topic_map, topic_checksum = self._topic_map, self._topic_checksum
+            if topic_map is not None and topic_checksum != served.checksum:
                 self._log.warning(f'{self._path} was built for another map '
                                   f'({served.checksum[:12]}) than the one on {self._topic} '
-                                  f'({topic_map.checksum()[:12]}): not using it; indexing the '
+                                  f'({topic_checksum[:12]}): not using it; indexing the '
                                   'map topic, the index file will be rewritten')
                 with self._lock:
                     self._save_to = self._path
-                self._consider(topic_map)
+                self._consider(topic_map, topic_checksum)
                 return
             if topic_map is not None:
-                served = ServedIndex(served.index, served.localizer, served.checksum,
-                                     served.source, getattr(topic_map, 'frame_id', '') or '')
+                served = replace(served, frame=getattr(topic_map, 'frame_id', '') or '')
         with self._lock:
             if kind == MAP and self._pending_checksum == served.checksum:
                 self._pending_checksum = None
@@ -174,12 +200,7 @@ class IndexSource:
                 self._save_to = None
         self._on_ready(served)
         if save_to is not None:
-            try:
-                save_to.parent.mkdir(parents=True, exist_ok=True)
-                self._save(index, save_to)
-                self._log.info(f'index written to {save_to}')
-            except (OSError, ValueError) as exc:
-                self._log.error(f'cannot write index file {save_to}: {exc}')
+            write_index(index, save_to, self._log, self._save)
 
     def on_error(self, exc: BaseException, label: str) -> None:
         """Handle IndexBuilder ``on_error``: a job failed."""
@@ -188,11 +209,11 @@ class IndexSource:
             with self._lock:
                 self._file_pending = False
                 self._save_to = self._path
-                topic_map = self._topic_map
+                topic_map, topic_checksum = self._topic_map, self._topic_checksum
             self._log.warning(f'cannot use index file {self._path} ({reason}): falling back to '
                               f'the map on {self._topic}; the file will be rewritten')
             if topic_map is not None:
-                self._consider(topic_map)
+                self._consider(topic_map, topic_checksum)
             return
         with self._lock:
             self._pending_checksum = None

@@ -22,6 +22,7 @@ except ImportError:  # pragma: no cover - depends on the install
 
 from rclpy.duration import Duration
 from rclpy.time import Time
+from ssm_localization.ros.conversions import transform_pose, unit_quaternion
 from ssm_localization.transforms import Pose2
 
 TF_AVAILABLE = tf2_ros is not None
@@ -58,18 +59,10 @@ def mount_from_transform(transform: Any) -> tuple[Pose2, bool, float]:
     The yaw is that of the laser's x axis projected on the base plane; ``tilt`` is the angle
     between the laser's z axis and the base's z axis (or -z when mirrored).
     """
-    t, q = transform.translation, transform.rotation
-    norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
-    if not math.isfinite(norm) or norm < 1e-9 or not all(
-            math.isfinite(v) for v in (t.x, t.y, t.z)):
-        raise ValueError('transform with a non-finite or zero rotation / translation')
-    x, y, z, w = q.x / norm, q.y / norm, q.z / norm, q.w / norm
-    r00 = 1.0 - 2.0 * (y * y + z * z)
-    r10 = 2.0 * (x * y + z * w)
-    r22 = 1.0 - 2.0 * (x * x + y * y)
-    mirrored = r22 < 0.0
-    tilt = math.acos(min(1.0, abs(r22)))
-    return (float(t.x), float(t.y), math.atan2(r10, r00)), mirrored, tilt
+    pose = transform_pose(transform)
+    x, y, _, _ = unit_quaternion(transform.rotation)
+    r22 = 1.0 - 2.0 * (x * x + y * y)       # z of the laser's z axis in the base frame
+    return pose, r22 < 0.0, math.acos(min(1.0, abs(r22)))
 
 
 class LaserPoseSource:

@@ -22,8 +22,6 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
-ACTIVE = State.PRIMARY_STATE_ACTIVE
-INACTIVE = State.PRIMARY_STATE_INACTIVE
 UNCONFIGURED = State.PRIMARY_STATE_UNCONFIGURED
 
 Transition = Callable[[Any, LifecycleState], TransitionCallbackReturn]

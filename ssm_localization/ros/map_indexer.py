@@ -10,6 +10,7 @@ the node configures and activates itself.
 """
 from __future__ import annotations
 
+import dataclasses
 from functools import partial
 from pathlib import Path
 import threading
@@ -19,26 +20,19 @@ from nav_msgs.msg import OccupancyGrid
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from ssm_localization.config import IndexConfig
-from ssm_localization.mapping.index import build_index, save_index
+from ssm_localization.mapping.index import build_index
 from ssm_localization.ros import markers
 from ssm_localization.ros.executor import spin
 from ssm_localization.ros.index_builder import IndexBuilder
+from ssm_localization.ros.index_source import map_label, write_index
 from ssm_localization.ros.lifecycle import (answer_invalid_transitions, configured_state,
                                             FAILURE, schedule_autostart, SUCCESS, transition)
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.parameter_guard import ParameterGuard
-from ssm_localization.ros.parameters import build_config, indexer_parameters, laser_pose_of
+from ssm_localization.ros.parameters import (build_config, config_problem, INDEXER_CONFIGS,
+                                             indexer_parameters, laser_pose_of)
 from ssm_localization.ros.qos import LATCHED_QOS
 from visualization_msgs.msg import MarkerArray
-
-
-def check_index_config(values: dict[str, Any]) -> str | None:
-    """Why the core refuses the index config of these values, or None."""
-    try:
-        build_config(IndexConfig, 'index', values, laser_pose_of(values))
-    except (ValueError, TypeError) as exc:
-        return f'invalid index.* parameters: {exc}'
-    return None
 
 
 class MapIndexerNode(LifecycleNode):
@@ -49,7 +43,7 @@ class MapIndexerNode(LifecycleNode):
         answer_invalid_transitions(self)
         self._guard = ParameterGuard(self, indexer_parameters(), (), {},
                                      partial(configured_state, self),
-                                     check_index_config)
+                                     partial(config_problem, INDEXER_CONFIGS))
         values = self._guard.declare()
         self._group = ReentrantCallbackGroup()
         self._lock = threading.Lock()
@@ -68,8 +62,7 @@ class MapIndexerNode(LifecycleNode):
         if self._destroying:
             return FAILURE
         values = self._guard.values()
-        self.laser_pose = laser_pose_of(values)
-        self.index_config = build_config(IndexConfig, 'index', values, self.laser_pose)
+        self.index_config = build_config(IndexConfig, 'index', values, laser_pose_of(values))
         self.index_file = str(values['index_file'])
         self.max_map_cells = int(values['max_map_cells'])
         self.max_gvd_points = int(values['max_gvd_points'])
@@ -122,13 +115,23 @@ class MapIndexerNode(LifecycleNode):
         if occ is None or self.builder is None:
             return
         checksum = occ.checksum()
+        busy = self.builder.busy         # with another map: this newer one must supersede it
         with self._lock:
-            same = checksum == self._checksum and self.index is not None and \
-                self.index.map.frame_id == occ.frame_id
-        if same:
+            index = self.index if checksum == self._checksum and not busy else None
+            if index is not None and index.map.frame_id != occ.frame_id:
+                index = self.index = dataclasses.replace(index, map=occ)
+                moved = True
+            else:
+                moved = False
+        if index is not None and not moved:
             self.get_logger().info('received the same map again: keeping its index')
             return
-        label = f'map {occ.width}x{occ.height} @ {occ.resolution:g} m ({checksum[:8]})'
+        if index is not None:
+            self.get_logger().info(f'the same map in frame {occ.frame_id!r}: keeping its index')
+            self._publish(index)
+            self._save(index)
+            return
+        label = map_label(occ, checksum)
         self.get_logger().info(f'{label}: indexing')
         cfg = self.index_config
         self.builder.submit(label, lambda progress: build_index(occ, cfg, progress=progress))
@@ -141,17 +144,14 @@ class MapIndexerNode(LifecycleNode):
 
     def _on_index(self, index, label: str) -> None:
         with self._lock:
-            self.index, self._checksum = index, index.map.checksum()
+            self.index, self._checksum = index, index.map_checksum
         self.get_logger().info(f'{label}: index ready, {len(index.node_xy)} nodes')
         self._publish(index)
+        self._save(index)
+
+    def _save(self, index) -> None:
         if self.index_file:
-            path = Path(self.index_file).expanduser()
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                save_index(index, path)
-                self.get_logger().info(f'index written to {path}')
-            except (OSError, ValueError) as exc:
-                self.get_logger().error(f'cannot write index file {path}: {exc}')
+            write_index(index, Path(self.index_file).expanduser(), self.get_logger())
 
     def _on_error(self, exc: BaseException, label: str) -> None:
         self.get_logger().warning(f'{label}: indexing failed ({type(exc).__name__}: {exc}); '

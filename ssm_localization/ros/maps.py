@@ -9,15 +9,10 @@ def map_from_msg(msg: OccupancyGrid, max_cells: int) -> OccupancyMap:
     """
     Convert OccupancyGrid -> OccupancyMap with a size guard.
 
-    Raises ValueError with the reason.
+    The size is checked before the cells are converted (``mapping.map_limits``; ``max_cells``
+    0: no limit). Raises ValueError with the reason.
     """
-    cells = int(msg.info.width) * int(msg.info.height)
-    if max_cells > 0 and cells > max_cells:
-        raise ValueError(f'map of {msg.info.width} x {msg.info.height} cells exceeds '
-                         f'max_map_cells = {max_cells}')
-    if not msg.info.resolution > 0.0:
-        raise ValueError(f'map resolution must be > 0, got {msg.info.resolution}')
-    occ = occupancy_map_from_msg(msg)
+    occ = occupancy_map_from_msg(msg, max_cells)
     if not occ.free_mask().any():
         raise ValueError('map has no free cells: nothing to index')
     return occ

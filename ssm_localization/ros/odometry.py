@@ -21,14 +21,10 @@ from typing import Any
 from geometry_msgs.msg import TransformStamped
 from rclpy.duration import Duration
 from rclpy.time import Time
-from ssm_localization.ros.conversions import pose_from_msg, stamp_to_ns, time_msg
-from ssm_localization.transforms import (compose, inverse, Pose2, pose_at_time,
-                                         quaternion_to_yaw, yaw_to_quaternion)
-
-try:  # optional: any real ROS 2 install has it, the PyPI wheels do not
-    import tf2_ros
-except ImportError:  # pragma: no cover - depends on the install
-    tf2_ros = None
+from ssm_localization.ros.conversions import (pose_from_msg, quaternion_msg, stamp_to_ns,
+                                              time_msg, transform_pose)
+from ssm_localization.ros.laser_pose import tf2_ros, TF_AVAILABLE
+from ssm_localization.transforms import compose, inverse, Pose2, pose_at_time
 
 #: odometry messages kept (at 50 Hz: 10 s)
 BUFFER_SIZE = 500
@@ -55,10 +51,6 @@ class OdometryBuffer:
                 return
             self._poses.append((stamp, pose))
 
-    def clear(self) -> None:
-        with self._lock:
-            self._poses.clear()
-
     def __len__(self) -> int:
         with self._lock:
             return len(self._poses)
@@ -75,7 +67,7 @@ class OdometrySource:
     The odometry pose of the base at a scan's stamp: the odom topic first, TF second.
 
     ``tf_buffer`` is anything with tf2_ros.Buffer's ``lookup_transform(target, source, time,
-    timeout)`` (None: no TF). ``describe()`` says where the last pose came from.
+    timeout)`` (None: no TF). ``last_source`` says where the last pose came from.
     """
 
     def __init__(self, buffer: OdometryBuffer, odom_frame: str, base_frame: str,
@@ -107,12 +99,6 @@ class OdometrySource:
         return None
 
 
-def transform_pose(transform: Any) -> Pose2:
-    """Return the planar pose (x, y, yaw) of a geometry_msgs/Transform."""
-    t, q = transform.translation, transform.rotation
-    return (float(t.x), float(t.y), quaternion_to_yaw(q.x, q.y, q.z, q.w))
-
-
 def map_to_odom(map_base: Pose2, odom_base: Pose2) -> Pose2:
     """Return ``T_map_odom`` given the base in the map frame and in the odom frame."""
     return compose(map_base, inverse(odom_base))
@@ -125,9 +111,7 @@ def transform_stamped(pose: Pose2, stamp_ns: int, parent: str, child: str) -> Tr
     msg.header.frame_id = parent
     msg.child_frame_id = child
     msg.transform.translation.x, msg.transform.translation.y = float(pose[0]), float(pose[1])
-    x, y, z, w = yaw_to_quaternion(float(pose[2]))
-    msg.transform.rotation.x, msg.transform.rotation.y = x, y
-    msg.transform.rotation.z, msg.transform.rotation.w = z, w
+    msg.transform.rotation = quaternion_msg(pose[2])
     return msg
 
 
@@ -148,7 +132,7 @@ class MapOdomBroadcaster:
     def for_node(cls, node: Any, odom_frame: str,
                  tolerance: float) -> 'MapOdomBroadcaster | None':
         """Return a broadcaster on ``/tf`` for ``node``; None when tf2_ros is not importable."""
-        if tf2_ros is None:
+        if not TF_AVAILABLE:
             return None
         return cls(tf2_ros.TransformBroadcaster(node), odom_frame, tolerance)
 

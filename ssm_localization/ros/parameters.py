@@ -1,8 +1,8 @@
 """
 The nodes' ROS parameters.
 
-Tables of ``{name: (default, description)}``, declaring them, the config dataclasses built from
-them and the generated params file.
+Tables of ``{name: (default, description)}`` (:mod:`ssm_localization.ros.parameter_guard`
+declares them), the config dataclasses built from them and the generated params file.
 
 Config fields become dotted parameter names (``index.*``, ``localizer.*``: the same nesting as
 :mod:`ssm_localization.config.params`), next to the nodes' own parameters.
@@ -14,8 +14,6 @@ from pathlib import Path
 import sys
 from typing import Any
 
-from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.node import Node
 from ssm_localization.config import IndexConfig, LocalizerConfig, TrackerConfig
 from ssm_localization.config import params as ssm_params
 import yaml
@@ -76,20 +74,6 @@ def config_parameter_table(prefix: str, config: Any) -> dict[str, tuple[Any, str
             for name, default in config_parameters(prefix, config).items()}
 
 
-def declare(node: Node, name: str, default: Any, description: str, read_only: bool = True) -> Any:
-    """Declare one parameter with a description; return its value."""
-    node.declare_parameter(name, default, ParameterDescriptor(description=description,
-                                                              read_only=read_only))
-    return node.get_parameter(name).value
-
-
-def declare_table(node: Node, table: dict[str, tuple[Any, str]],
-                  dynamic: tuple[str, ...] = ()) -> dict[str, Any]:
-    """Declare every ``name: (default, description)``; read-only unless listed in ``dynamic``."""
-    return {name: declare(node, name, default, desc, name not in dynamic)
-            for name, (default, desc) in table.items()}
-
-
 def _with_sensor_pose(config: Any, pose: tuple[float, float, float]) -> Any:
     """Set the laser/sensor pose field(s) of a config tree to ``pose``."""
     changes = {}
@@ -112,6 +96,23 @@ def build_config(cls: type, prefix: str, values: dict[str, Any],
 
 def laser_pose_of(values: dict[str, Any]) -> tuple[float, float, float]:
     return (float(values['laser_x']), float(values['laser_y']), float(values['laser_yaw']))
+
+
+#: the config dataclasses each node builds from its parameters: ``(class, prefix)``
+INDEXER_CONFIGS = ((IndexConfig, 'index'),)
+LOCALIZER_CONFIGS = ((IndexConfig, 'index'), (LocalizerConfig, 'localizer'),
+                     (TrackerConfig, 'tracker'))
+
+
+def config_problem(configs: tuple[tuple[type, str], ...], values: dict[str, Any]) -> str | None:
+    """Why the core refuses one of the ``(class, prefix)`` configs of these values, or None."""
+    pose = laser_pose_of(values)
+    for cls, prefix in configs:
+        try:
+            build_config(cls, prefix, values, pose)
+        except (ValueError, TypeError) as exc:
+            return f'invalid {prefix}.* parameters: {exc}'
+    return None
 
 
 LASER_PARAMS: dict[str, tuple[Any, str]] = {
@@ -234,7 +235,9 @@ def parameters_markdown() -> str:
              'defaults. Dotted names are config fields: `index.*` is `IndexConfig`,',
              '`index.matcher.*` `MatcherConfig`, `index.topology.*` `TopologyConfig`,',
              '`localizer.*` `LocalizerConfig`, `tracker.*` `TrackerConfig` (mode `track`).',
-             'All of them are read-only except the ones marked *dynamic*.']
+             'The ones marked *dynamic* may change in any lifecycle state; the others are',
+             'read at configure and may change only while the node is unconfigured',
+             '(`ros2 lifecycle set NODE cleanup` first).']
     for node, table in node_tables().items():
         lines += ['', f'## {node}', '', '| parameter | default | description |', '|---|---|---|']
         for name, (default, desc) in table.items():

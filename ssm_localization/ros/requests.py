@@ -38,7 +38,6 @@ class Answer:
 
     ok: bool
     message: str
-    result: Any = None       # the Localization, when one was computed
 
 
 class ScanMailbox:

@@ -77,8 +77,7 @@ class TrackSession:
         """Restart the track from ``pose`` (``ValueError`` for a bad pose or covariance)."""
         with self._lock:
             if self._tracker is None:
-                Tracker.check_prior(pose, covariance)
-                self._pending = (pose, covariance)
+                self._pending = Tracker.check_prior(pose, covariance)
             else:
                 self._tracker.set_prior(pose, covariance)
 
@@ -94,7 +93,9 @@ class TrackSession:
             raise ValueError(f'initialpose in frame {frame!r}, not the map frame {map_frame!r}')
         pose = pose_from_msg(msg.pose.pose)
         cov = covariance3(msg.pose.covariance)
-        if not np.all(np.isfinite(cov)) or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0:
+        try:
+            Tracker.check_prior(pose, cov)
+        except ValueError:
             cov = None                   # RViz sends a fixed one; a degenerate one: the default
         self.set_prior(pose, cov)
         x, y, yaw = pose
