@@ -154,3 +154,27 @@ def test_random_grids_match_brute_force(seed):
     assert np.array_equal(np.isinf(got), np.isinf(expect))
     fin = np.isfinite(expect)
     assert np.abs(got[fin] - expect[fin]).max(initial=0.0) < 1e-9
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_plain_python_tail_gives_the_same_ranges_as_the_vectorized_loop(seed):
+    """Rays finished one by one (``tail_rays``) must read exactly what the numpy loop reads."""
+    from ssm_localization.mapping.raycast import RayCaster
+    rng = np.random.default_rng(100 + seed)
+    h, w = rng.integers(80, 200, 2)
+    occ = rng.random((h, w)) < (0.002, 0.01, 0.03, 0.0005)[seed]
+    occ |= _room(h, w)
+    origin = (rng.uniform(-2, 2), rng.uniform(-2, 2), rng.uniform(-3, 3))
+    c, s = math.cos(origin[2]), math.sin(origin[2])
+    u, v = rng.uniform(0, w * RES, 30), rng.uniform(0, h * RES, 30)
+    poses = np.column_stack((origin[0] + c * u - s * v, origin[1] + s * u + c * v,
+                             rng.uniform(-math.pi, math.pi, 30)))
+    angles = np.concatenate((beam_angles(90), [0.0, math.pi / 2, math.pi / 4]))
+    vectorized, scalar, mixed = (RayCaster(occ, RES, origin) for _ in range(3))
+    vectorized.tail_rays, scalar.tail_rays, mixed.tail_rays = 0, 10 ** 9, 200
+    a = vectorized.cast(poses, angles, 12.0)
+    assert np.isfinite(a).mean() > 0.9
+    for caster in (scalar, mixed):
+        b = caster.cast(poses, angles, 12.0)
+        assert np.array_equal(np.isinf(a), np.isinf(b))
+        assert np.array_equal(a[np.isfinite(a)], b[np.isfinite(b)])

@@ -25,6 +25,9 @@ class RayCaster:
     ``accelerate=False`` skips the distance transform (cheaper for a few rays on a big grid).
     """
 
+    #: below this many unfinished rays, :meth:`cast` finishes them one by one in plain Python
+    tail_rays = 128
+
     def __init__(self, occupied: np.ndarray, resolution: float, origin,
                  accelerate: bool = True) -> None:
         occ = np.asarray(occupied, dtype=bool)
@@ -104,6 +107,10 @@ class RayCaster:
         code, skip = self._code, self._skip
         ranges = out.reshape(-1)
         while ids.size:
+            if ids.size <= self.tail_rays:
+                self._finish(ranges, ids, flat, t, t1, tmx, tmy, tdx, tdy, dflat_x, dflat_y,
+                             px, py, ux, uy, inv_x, inv_y)
+                break
             cell = code[flat]
             over = t > t1
             hit = (cell == 1) & ~over
@@ -144,6 +151,43 @@ class RayCaster:
                 tmx[near] = np.where(xs, a + tdx[near], a)
                 tmy[near] = np.where(xs, b, b + tdy[near])
         return out
+
+    def _finish(self, ranges, ids, flat, t, t1, tmx, tmy, tdx, tdy, dflat_x, dflat_y,
+                px, py, ux, uy, inv_x, inv_y) -> None:
+        """
+        Finish the last few rays one by one in plain Python.
+
+        The same steps, in the same floating-point operations, as the vectorized loop of
+        :meth:`cast` (so the same ranges), without its per-step numpy overhead, which dominates
+        once few rays are left (the long ones, often grazing a wall cell by cell).
+        """
+        code, skip, res = memoryview(self._code), memoryview(self._skip), self.resolution
+        h, w = self.shape
+        wp = w + 2
+        rays = zip(ids.tolist(), flat.tolist(), t.tolist(), t1.tolist(), tmx.tolist(),
+                   tmy.tolist(), tdx.tolist(), tdy.tolist(), dflat_x.tolist(), dflat_y.tolist(),
+                   px.tolist(), py.tolist(), ux.tolist(), uy.tolist(), inv_x.tolist(),
+                   inv_y.tolist())
+        for ray, f, ti, t_end, ax, ay, dx, dy, sx, sy, x0, y0, vx, vy, ix, iy in rays:
+            while True:
+                cell = code[f]
+                over = ti > t_end
+                if cell == 1 and not over:
+                    ranges[ray] = ti * res
+                if cell != 0 or over:
+                    break
+                jump = skip[f]
+                if jump >= 2.0:      # as in _locate, without the nudge
+                    ti = min(ti + jump, t_end + 1.0)
+                    col = min(max(math.floor(x0 + vx * ti), -1), w)
+                    row = min(max(math.floor(y0 + vy * ti), -1), h)
+                    ax = ((col + 1.0 if vx > 0 else float(col)) - x0) * ix if vx != 0 else math.inf
+                    ay = ((row + 1.0 if vy > 0 else float(row)) - y0) * iy if vy != 0 else math.inf
+                    f = (row + 1) * wp + (col + 1)
+                elif ax < ay:
+                    ti, f, ax = ax, f + sx, ax + dx
+                else:
+                    ti, f, ay = ay, f + sy, ay + dy
 
     def _locate(self, px, py, ux, uy, inv_x, inv_y, t, nudge):
         """
