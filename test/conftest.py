@@ -252,19 +252,23 @@ class LocalizerRig:
         return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout,
                                       0.05))
 
-    def call_relocalize(self, scan=None, timeout: float = 30.0):
-        """Call relocalize; publish ``scan`` every 50 ms until the answer arrives."""
-        from std_srvs.srv import Trigger
-        self.n_poses_before = len(self.poses)
-        assert self.client.wait_for_service(timeout_sec=10.0)
-        future = self.client.call_async(Trigger.Request())
+    def call(self, client, request, scan=None, timeout: float = 30.0):
+        """Call a service; publish ``scan`` every 50 ms until the answer arrives."""
+        assert client.wait_for_service(timeout_sec=10.0)
+        future = client.call_async(request)
         end = time.monotonic() + timeout
         while not future.done() and time.monotonic() < end:
             if scan is not None:
                 self.scan_pub.publish(scan)
             time.sleep(0.05)
-        assert future.done(), 'relocalize did not answer'
+        assert future.done(), f'{client.srv_name} did not answer'
         return future.result()
+
+    def call_relocalize(self, scan=None, timeout: float = 30.0):
+        """Call relocalize (Trigger); publish ``scan`` every 50 ms until the answer arrives."""
+        from std_srvs.srv import Trigger
+        self.n_poses_before = len(self.poses)
+        return self.call(self.client, Trigger.Request(), scan, timeout)
 
 
 def close_pose(pose, truth, pos_tol: float = 0.15, yaw_tol: float = 0.05) -> bool:

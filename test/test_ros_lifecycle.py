@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 
-from conftest import find_bag, REPO, ros_params, synthetic_map
+from conftest import find_bag, LocalizerRig, REPO, ros_params, synthetic_map
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from lifecycle_msgs.msg import Transition
@@ -21,12 +21,10 @@ import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
-from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, ReliabilityPolicy
-from sensor_msgs.msg import LaserScan
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from ssm_localization.io.bag_reader import read_bag
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_from_msg)
-from ssm_localization.ros.global_localizer import GlobalLocalizerNode
 from ssm_localization.ros.map_indexer import MapIndexerNode
 from ssm_localization.ros.qos import LATCHED_QOS
 from ssm_localization.transforms import wrap_angle
@@ -83,38 +81,19 @@ def bag():
     return Bag()
 
 
-class Rig:
-    """A global_localizer in the harness with map / scan publishers and service clients."""
+class Rig(LocalizerRig):
+    """The shared rig plus the lifecycle, ``global_localization`` and the published topics."""
 
     def __init__(self, ros, **params) -> None:
-        params.setdefault('scan_timeout', 3.0)
         params.setdefault('localizer.surface_depth', 0.0)      # simulated bag
-        self.ros = ros
-        self.node = ros.add(GlobalLocalizerNode(context=ros.context,
-                                                parameter_overrides=ros_params(**params)))
+        super().__init__(ros, **params)
         self.lifecycle = Lifecycle(ros, 'global_localizer')
-        self.map_pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
-        self.scan_pub = ros.node.create_publisher(LaserScan, 'scan', qos_profile_sensor_data)
-        self.relocalize_client = ros.node.create_client(Trigger, 'relocalize')
         self.empty_client = ros.node.create_client(Empty, 'global_localization')
         self.setter = ros.node.create_client(SetParameters, 'global_localizer/set_parameters')
-        self.poses = ros.collect(PoseWithCovarianceStamped, 'global_pose', LATCHED_QOS)
         self.initial = ros.collect(PoseWithCovarianceStamped, 'initialpose', 10)
         self.candidates = ros.collect(PoseArray, 'candidates', LATCHED_QOS)
         self.diagnostics = ros.collect(DiagnosticArray, '/diagnostics', 10)
         self.markers = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
-
-    def call(self, client, request, scan: LaserScan | None = None, timeout: float = 30.0):
-        """Call a service; publish ``scan`` every 50 ms until the answer arrives."""
-        assert client.wait_for_service(timeout_sec=10.0)
-        future = client.call_async(request)
-        end = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < end:
-            if scan is not None:
-                self.scan_pub.publish(scan)
-            time.sleep(0.05)
-        assert future.done(), 'service did not answer'
-        return future.result()
 
     def set_remote(self, name: str, value: int):
         """Set an integer parameter over DDS (the node's set_parameters service)."""
@@ -123,13 +102,6 @@ class Rig:
         res = self.ros.call(self.setter, req, 10.0)
         assert res is not None, 'set_parameters did not answer'
         return res.results[0]
-
-    def relocalize(self, scan=None, timeout=30.0):
-        return self.call(self.relocalize_client, Trigger.Request(), scan, timeout)
-
-    def ready(self, timeout=120.0) -> bool:
-        return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout,
-                                      0.05))
 
     def our_status(self, arr: DiagnosticArray):
         return next((s for s in arr.status if 'global_localizer' in s.name), None)
@@ -142,7 +114,7 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
 
     # unconfigured: clear answers, invalid transitions refused, node alive
     assert lc.state() == 'unconfigured'
-    res = rig.relocalize(scan0, 10)
+    res = rig.call_relocalize(scan0, 10)
     assert not res.success and 'unconfigured' in res.message and 'configure' in res.message
     t0 = time.monotonic()
     rig.call(rig.empty_client, Empty.Request(), scan0, 10)       # answered, not left hanging
@@ -155,8 +127,8 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
     rig.map_pub.publish(occupancy_grid_from_map(bag.map))
     assert lc.change(Transition.TRANSITION_CONFIGURE)
     assert lc.state() == 'inactive'
-    assert rig.ready()
-    res = rig.relocalize(scan0, 10)
+    assert rig.wait_ready()
+    res = rig.call_relocalize(scan0, 10)
     assert not res.success and 'inactive' in res.message and 'activate' in res.message
     assert not rig.poses and not rig.markers, 'an inactive node publishes nothing'
 
@@ -190,13 +162,13 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
     assert float(values['latency_ms']) > 0 and int(values['candidates']) == len(cands.poses)
 
     # deactivate: a waiting call is answered at once, later calls refused, nothing published
-    future = rig.relocalize_client.call_async(Trigger.Request())
+    future = rig.client.call_async(Trigger.Request())
     time.sleep(0.3)
     assert lc.change(Transition.TRANSITION_DEACTIVATE)
     assert ros.wait_for(future.done, 5)
     assert not future.result().success and 'deactivated' in future.result().message
     n = len(rig.poses)
-    res = rig.relocalize(scan0, 10)
+    res = rig.call_relocalize(scan0, 10)
     assert not res.success and 'inactive' in res.message
     assert len(rig.poses) == n
 
@@ -209,14 +181,14 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
     assert rig.set_remote('localizer.top_n', 3).successful
     result = rig.set_remote('localizer.top_n', 0)           # the core refuses it: so do we
     assert not result.successful and 'top_n' in result.reason
-    assert lc.change(Transition.TRANSITION_CONFIGURE) and rig.ready()
+    assert lc.change(Transition.TRANSITION_CONFIGURE) and rig.wait_ready()
     assert rig.node.localizer_config.top_n == 3
     assert lc.change(Transition.TRANSITION_ACTIVATE)
-    res = rig.relocalize(scan0)
+    res = rig.call_relocalize(scan0)
     assert res.success, res.message
     assert lc.change(Transition.TRANSITION_ACTIVE_SHUTDOWN)
     assert lc.state() == 'finalized'
-    res = rig.relocalize(scan0, 10)
+    res = rig.call_relocalize(scan0, 10)
     assert not res.success and 'finalized' in res.message
 
 
