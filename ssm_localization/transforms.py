@@ -7,6 +7,7 @@ into frame a: ``p_a = R(yaw) @ p_b + (x, y)``.
 from __future__ import annotations
 
 import bisect
+import math
 from typing import Sequence
 
 import numpy as np
@@ -63,8 +64,50 @@ def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
     return (0.0, 0.0, float(np.sin(yaw / 2.0)), float(np.cos(yaw / 2.0)))
 
 
+def unit_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float, float, float]:
+    """
+    Return ``(x, y, z, w)`` scaled to unit length.
+
+    ``ValueError`` for a quaternion with a non-finite component or (almost) zero length, which
+    is no rotation at all.
+    """
+    q = tuple(float(v) for v in (x, y, z, w))
+    norm = math.sqrt(sum(v * v for v in q))
+    if not math.isfinite(norm) or norm < 1e-9:
+        raise ValueError(f'not a rotation: quaternion (x, y, z, w) = {q} is zero or not finite')
+    return tuple(v / norm for v in q)
+
+
 def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
-    return float(np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+    """
+    Return the yaw of a rotation: the heading of its rotated x axis in the plane.
+
+    The quaternion is normalised first (a message's quaternion need not be unit length);
+    ``ValueError`` for a zero or non-finite one (:func:`unit_quaternion`).
+    """
+    x, y, z, w = unit_quaternion(x, y, z, w)
+    return float(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def quaternion_tilt(x: float, y: float, z: float, w: float) -> float:
+    """Return the angle (rad) between the rotated z axis and z: 0 for a rotation about z only."""
+    x, y, z, w = unit_quaternion(x, y, z, w)
+    return float(math.acos(min(1.0, max(-1.0, 1.0 - 2.0 * (x * x + y * y)))))
+
+
+def planar_yaw(x: float, y: float, z: float, w: float, what: str = 'orientation',
+               max_tilt: float = math.radians(1.0)) -> float:
+    """
+    Return the yaw of a rotation that must be about z (a 2-D map's origin, say).
+
+    ``ValueError`` naming ``what`` when it tilts the z axis by more than ``max_tilt``: a map
+    rolled by 180 deg is mirrored, and reading only its yaw would place every pose wrong.
+    """
+    tilt = quaternion_tilt(x, y, z, w)
+    if tilt > max_tilt:
+        raise ValueError(f'{what} is not a rotation about z: it tilts the z axis by '
+                         f'{math.degrees(tilt):.1f} deg (roll / pitch must be 0 in 2-D)')
+    return quaternion_to_yaw(x, y, z, w)
 
 
 def interpolate(a: Pose2, b: Pose2, f: float) -> Pose2:

@@ -23,6 +23,7 @@ from ..localization.localizer import GlobalLocalizer
 from ..localization.tracker import Tracker
 from ..mapping.index import build_index, load_index
 from ..mapping.map_io import load_map_yaml
+from ..mapping.map_limits import MapTooLargeError
 from ..progress import TqdmProgress
 
 
@@ -47,6 +48,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--limit', type=nonnegative_int, default=0,
                         help='localize only the first N scans (0 = all)')
     add_max_map_cells(parser)
+    parser.add_argument('--allow-map-mismatch', action='store_true',
+                        help='with --map / --index: localize even when the bag holds a /map '
+                             'that differs from that map (poses are then in the frame of the '
+                             "given map, not of the bag's)")
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
@@ -57,10 +62,12 @@ def run(args: argparse.Namespace) -> int:
     index_cfg, loc_cfg, track_cfg = load_all_configs(args.params)
     index = load_index(args.index, max_cells=args.max_map_cells) if args.index else None
     grid = load_map_yaml(args.map, max_cells=args.max_map_cells) if args.map else None
-    bag = read_bag(args.bag, scan_topic=args.scan_topic, max_map_cells=args.max_map_cells,
-                   read_map=index is None and grid is None)
+    bag = _read_bag(args)
     if not bag.scans:
         raise ValueError(f'{args.bag}: no LaserScan messages on {args.scan_topic}')
+    if bag.map is not None and (index is not None or grid is not None):
+        given = index.map_checksum if index is not None else grid.checksum()
+        _check_same_map(args, bag.map.checksum(), given)
     if index is None:
         if grid is None:
             grid = bag.map
@@ -97,3 +104,42 @@ def run(args: argparse.Namespace) -> int:
         plot_replay(index, rows, args.plot)
         print(f'wrote {args.plot}')
     return 0
+
+
+def _read_bag(args: argparse.Namespace):
+    """
+    Return the bag's scans, poses and its /map (when there is one).
+
+    With ``--map`` / ``--index`` the bag's own /map is read only to compare it with the given
+    map; one too large for ``--max-map-cells`` is then skipped with a note.
+    """
+    given = bool(args.map or args.index)
+    try:
+        return read_bag(args.bag, scan_topic=args.scan_topic, max_map_cells=args.max_map_cells)
+    except MapTooLargeError:
+        if not given:
+            raise
+        print(f"note: the bag's /map exceeds --max-map-cells; not compared with "
+              f'{args.map or args.index}')
+        return read_bag(args.bag, scan_topic=args.scan_topic, read_map=False)
+
+
+def _check_same_map(args: argparse.Namespace, bag_checksum: str, given_checksum: str) -> None:
+    """
+    Refuse a ``--map`` / ``--index`` built from another map than the bag's /map.
+
+    Its poses would be in that other map's frame: compared with the bag's ground truth, or
+    handed to a robot on the bag's map, they would be wrong while looking confident.
+    ``--allow-map-mismatch`` turns the refusal into a warning.
+    """
+    if bag_checksum == given_checksum:
+        return
+    what = f'--index {args.index}' if args.index else f'--map {args.map}'
+    text = (f"{what} was built from another map than the bag's /map (checksum "
+            f'{given_checksum[:12]} vs {bag_checksum[:12]})')
+    if not args.allow_map_mismatch:
+        raise ValueError(f'{text}: poses would be in the frame of that other map. Rebuild the '
+                         f'index from the map the bag was recorded on, or pass '
+                         f'--allow-map-mismatch to localize on it anyway')
+    print(f'warning: {text}; localizing on it anyway (--allow-map-mismatch): poses and '
+          f'ground-truth figures are in its frame')

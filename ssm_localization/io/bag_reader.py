@@ -27,10 +27,14 @@ def _stamp_of(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def _pose_of(pose_msg) -> Pose2:
+def _pose_of(pose_msg, path: Path, topic: str) -> Pose2:
+    """Return ``(x, y, yaw)`` of a geometry_msgs/Pose; ``BagError`` for a zero quaternion."""
     q = pose_msg.orientation
-    return (float(pose_msg.position.x), float(pose_msg.position.y),
-            quaternion_to_yaw(q.x, q.y, q.z, q.w))
+    try:
+        yaw = quaternion_to_yaw(q.x, q.y, q.z, q.w)
+    except ValueError as exc:
+        raise BagError(f'{path}: {topic}: {exc}') from None
+    return (float(pose_msg.position.x), float(pose_msg.position.y), yaw)
 
 
 def _resolve(path: str | Path) -> Path:
@@ -235,9 +239,9 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
                 except ValueError as exc:
                     raise type(exc)(f'{rd.path}: {MAP_TOPIC}: {exc}') from None
             elif topic == GT_TOPIC:
-                gt[_stamp_of(msg.header)] = _pose_of(msg.pose)
+                gt[_stamp_of(msg.header)] = _pose_of(msg.pose, rd.path, topic)
             elif topic == ODOM_TOPIC:
-                od[_stamp_of(msg.header)] = _pose_of(msg.pose.pose)
+                od[_stamp_of(msg.header)] = _pose_of(msg.pose.pose, rd.path, topic)
             _progress_step(progress, n, total)
         return BagData(map=occ_map, scans=scans, ground_truth=gt, odom=od,
                        topic_counts=dict(rd.counts))

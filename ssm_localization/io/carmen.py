@@ -33,7 +33,8 @@ from ..progress import ProgressCallback
 from ..transforms import apply, compose, inverse
 
 #: no-return readings of the shared logs (the sensor maximum), by file-name prefix
-NO_RETURN = {'intel': 81.83, 'aces': 50.0, 'freiburg-079': 81.91}
+NO_RETURN = {'intel': 81.83, 'aces': 50.0, 'freiburg-079': 81.91, 'csail': 81.91, 'fhw': 51.0,
+             'edmonton': 51.0}
 #: longest line read from a log (a FLASER line of 361 readings is about 3 kB)
 MAX_LINE_CHARS = 1 << 20
 

@@ -50,7 +50,7 @@ from ..matching.features import prepare_scan, ScanFeatures
 from ..matching.matcher import match_features, spectral_score, spectral_solution
 from ..matching.pairwise import affinity_matrix, angle_table, distance_table
 from ..matching.ransac import ransac_hypotheses
-from ..matching.scan import ranges_to_points
+from ..matching.scan import MAX_RANGE, ranges_to_points
 from ..matching.spectral import binarize, leading_eigenvector, matching_score
 from ..transforms import apply, compose, inverse, Pose2, wrap_angle
 
@@ -276,8 +276,9 @@ class GlobalLocalizer:
         ranges = np.asarray(ranges, dtype=float).ravel()
         points, _ = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
         angles = angle_min + angle_increment * np.arange(len(ranges))
-        beams = np.where((ranges >= range_min) & (ranges <= range_max), ranges, np.inf)
-        keep = ~np.isnan(ranges)
+        with np.errstate(invalid='ignore'):
+            beams = np.where((ranges >= range_min) & (ranges <= range_max), ranges, np.inf)
+            keep = ~np.isnan(ranges) & ~(np.isfinite(ranges) & (ranges > MAX_RANGE))
         return self.prepare_points(points, angles[keep], beams[keep])
 
     def prepare_points(self, points: np.ndarray, angles: np.ndarray, beams: np.ndarray) -> Query:

@@ -17,11 +17,11 @@ import numpy as np
 from PIL import Image
 
 from .map_image import read_shade
-from .map_limits import check_map_cells, MAX_MAP_CELLS
+from .map_limits import check_map_cells, check_resolution, MAX_MAP_CELLS
 from ..files.reading import echo, input_file
 from ..files.writing import atomic_files
 from ..files.yaml_input import load_yaml_file
-from ..transforms import apply, quaternion_to_yaw
+from ..transforms import apply, planar_yaw
 
 MODES = ('trinary', 'scale', 'raw')
 
@@ -71,6 +71,7 @@ class OccupancyMap:
         if len(origin) != 3 or not all(map(_fits_float32, origin)):
             raise ValueError(f'OccupancyMap.origin: expected finite (x, y, yaw) within float32 '
                              f'range, got {echo(self.origin)}')
+        check_resolution(res, 'OccupancyMap')
         object.__setattr__(self, 'data', np.ascontiguousarray(data, dtype=np.int8))
         object.__setattr__(self, 'resolution', canonical(res))
         object.__setattr__(self, 'origin', tuple(canonical(v) for v in origin))
@@ -187,8 +188,7 @@ def load_map_yaml(path: str | Path, max_cells: int = MAX_MAP_CELLS) -> Occupancy
         raise ValueError(f'{path}: expected a mapping with image, resolution, origin, ...')
     image = _field(doc, 'image', path, str)
     resolution = _field(doc, 'resolution', path, float)
-    if resolution <= 0.0:
-        raise ValueError(f"{path}: field 'resolution' must be > 0, got {resolution}")
+    check_resolution(resolution, str(path))
     origin = _field(doc, 'origin', path, 'origin')
     if not all(map(_fits_float32, (resolution, *origin))):
         raise ValueError(f"{path}: fields 'resolution' and 'origin' must be within float32 "
@@ -270,21 +270,34 @@ def occupancy_map_from_msg(msg, max_cells: int = 0) -> OccupancyMap:
         width, height = int(info.width), int(info.height)
         resolution = float(info.resolution)
         pos, q = info.origin.position, info.origin.orientation
-        yaw = quaternion_to_yaw(float(q.x), float(q.y), float(q.z), float(q.w))
+        quaternion = (float(q.x), float(q.y), float(q.z), float(q.w))
         frame_id = str(getattr(getattr(msg, 'header', None), 'frame_id', '') or 'map')
         raw = msg.data
     except AttributeError as exc:
         raise ValueError(f'OccupancyGrid message: missing field ({exc})') from None
     if width <= 0 or height <= 0:
         raise ValueError(f'OccupancyGrid message: empty map ({width} x {height})')
+    try:
+        yaw = planar_yaw(*quaternion, what='the origin orientation')
+    except ValueError as exc:
+        raise ValueError(f'OccupancyGrid message: {exc}') from None
     check_map_cells(width, height, max_cells, 'OccupancyGrid message')
+    check_resolution(resolution, 'OccupancyGrid message')
     data = np.asarray(raw)
     if data.dtype.kind not in 'iu':
         data = np.asarray(raw, dtype=np.int64)
+    unsigned = data.dtype.kind == 'u'
     data = data.astype(np.int16).reshape(-1)
     if data.size != width * height:
         raise ValueError(f'OccupancyGrid message: len(data) = {data.size} != width * height = '
                          f'{width} * {height}')
-    data = np.where((data < -1) | (data > 100), -1, data)  # uint8 view of -1 is 255
+    if unsigned:
+        data[data == 255] = -1                  # the uint8 view of int8 -1 (unknown)
+    bad = np.flatnonzero((data < -1) | (data > 100))
+    if bad.size:
+        row, col = divmod(int(bad[0]), width)
+        raise ValueError(f'OccupancyGrid message: {bad.size} cells hold values outside -1 '
+                         f'(unknown) .. 100 (first: {int(data[bad[0]])} at row {row}, column '
+                         f'{col}); not an occupancy grid')
     return OccupancyMap(data.reshape(height, width).astype(np.int8), resolution,
                         (float(pos.x), float(pos.y), yaw), frame_id)

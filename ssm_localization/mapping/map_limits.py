@@ -11,6 +11,12 @@ from __future__ import annotations
 MAX_MAP_CELLS = 25_000_000
 
 
+#: map resolutions accepted, metres per cell: a laser map finer than a millimetre or coarser than
+#: 10 m is a unit mistake (a resolution in mm or km), not a map to localize in
+MIN_RESOLUTION = 1e-3
+MAX_RESOLUTION = 10.0
+
+
 class MapTooLargeError(ValueError):
     """A map whose cell count exceeds the configured ``max_map_cells``."""
 
@@ -28,3 +34,15 @@ def check_map_cells(width: int, height: int, max_cells: int, where: str = 'map')
     if max_cells and cells > max_cells:
         raise MapTooLargeError(f'{where}: map of {int(width)} x {int(height)} cells exceeds '
                                f'max_map_cells = {max_cells} (0 = no limit)')
+
+
+def check_resolution(resolution: float, where: str = 'map') -> float:
+    """
+    Return ``resolution`` as a float; ``ValueError`` naming ``where`` unless it lies in
+    [:data:`MIN_RESOLUTION`, :data:`MAX_RESOLUTION`] metres per cell.
+    """
+    res = float(resolution)
+    if not MIN_RESOLUTION <= res <= MAX_RESOLUTION:
+        raise ValueError(f'{where}: resolution {res!r} m per cell is outside '
+                         f'[{MIN_RESOLUTION}, {MAX_RESOLUTION}] (a unit mistake?)')
+    return res

@@ -13,13 +13,19 @@ import math
 import numpy as np
 
 
+#: longest plausible reading, metres: finite readings beyond it (1e30, say) are garbage, dropped
+#: like NaN rather than taken for points thousands of kilometres away
+MAX_RANGE = 1000.0
+
+
 def ranges_to_points(ranges, angle_min: float, angle_increment: float, range_min: float = 0.0,
                      range_max: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
     """
     Convert LaserScan ranges to ``(points (N, 2), index (N,))`` in the laser frame.
 
     Beam ``b`` is at ``angle_min + b * angle_increment`` (negative increments allowed). Drops
-    NaN, +-inf, non-positive readings and readings outside ``[range_min, range_max]``. Points are
+    NaN, +-inf, non-positive readings, readings beyond :data:`MAX_RANGE` and readings outside
+    ``[range_min, range_max]``. Points are
     returned in counterclockwise sweep order (increasing beam angle, i.e. reversed for a negative
     increment) so that tangents (eq. 1) have the same orientation for every scanner; ``index``
     holds the beam index of each point in ``ranges``.
@@ -33,7 +39,8 @@ def ranges_to_points(ranges, angle_min: float, angle_increment: float, range_min
         raise ValueError('angle_increment must not be 0')
     idx = np.arange(r.size)
     with np.errstate(invalid='ignore'):
-        ok = np.isfinite(r) & (r > 0.0) & (r >= range_min) & (r <= range_max)
+        ok = (np.isfinite(r) & (r > 0.0) & (r >= range_min) & (r <= range_max)
+              & (r <= MAX_RANGE))
     idx = idx[ok]
     if angle_increment < 0.0:
         idx = idx[::-1]

@@ -41,7 +41,10 @@ class OdometryBuffer:
     def add(self, msg: Any) -> None:
         """Keep one nav_msgs/Odometry message (out-of-order ones are dropped)."""
         stamp = stamp_to_ns(msg.header.stamp)
-        pose = pose_from_msg(msg.pose.pose)
+        try:
+            pose = pose_from_msg(msg.pose.pose)
+        except ValueError:                  # a zero or non-finite quaternion: no pose at all
+            return
         if not all(math.isfinite(v) for v in pose):
             return
         with self._lock:
