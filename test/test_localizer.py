@@ -6,6 +6,7 @@ refinement), frames, the status policy and bad input.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from conftest import BAGS
@@ -13,6 +14,8 @@ import numpy as np
 import pytest
 from ssm_localization import (build_index, GlobalLocalizer, IndexConfig, Localization,
                               LocalizerConfig, read_bag, simulate, SimulationConfig)
+from ssm_localization.config.confidence import CONFIDENCE_MODEL
+from ssm_localization.localization.evidence import Evidence
 from ssm_localization.localization.localizer import Hypothesis, STATUSES, verdict, vicinity_score
 from ssm_localization.localization.verify import BeamCheck
 from ssm_localization.mapping.map_io import OccupancyMap
@@ -308,30 +311,60 @@ def _verified(pose, score, std=0.03) -> Hypothesis:
                       covariance=np.diag([std ** 2, std ** 2, 1e-4]))
 
 
+#: evidence strong enough for any confidence threshold (the rules are what these tests judge)
+STRONG = Evidence(hit=0.98, through=0.0, short=0.02, missing=0.0, on_wall=0.99, unknown=0.0,
+                  unexplained_runs=0.0, explained=0.95, margin=0.8, position_std=0.04,
+                  yaw_std=0.005, returns=120, scan_length=30.0, extent=10.0)
+
+
 def test_verdict_status_policy():
     cfg = LocalizerConfig()
     m = cfg.ambiguity_margin
     best = _verified((0.0, 0.0, 0.0), 0.8)
-    status, _, _ = verdict([best, _verified((5.0, 0.0, 0.0), 0.8 - 2 * m)], cfg)
+
+    def judge(ranked, evidence=STRONG):
+        status, msg, cov, conf = verdict(ranked, cfg, evidence)
+        assert 0.0 <= conf <= 1.0
+        return status, msg, cov
+
+    status, _, _ = judge([best, _verified((5.0, 0.0, 0.0), 0.8 - 2 * m)])
     assert status == 'ok'                                    # the rival is clearly worse
-    status, msg, cov = verdict([best, _verified((5.0, 0.0, 0.0), 0.8 - m / 2)], cfg)
+    status, msg, cov = judge([best, _verified((5.0, 0.0, 0.0), 0.8 - m / 2)])
     assert status == 'ambiguous' and 'distinct' in msg
     assert cov[0, 0] >= 2.5 ** 2                             # the covariance spans both places
     # the same place found twice is not a rival
-    assert verdict([best, _verified((0.1, 0.0, 0.01), 0.8)], cfg)[0] == 'ok'
+    assert judge([best, _verified((0.1, 0.0, 0.01), 0.8)])[0] == 'ok'
     # a turn more than distinct_yaw away at the same spot is
-    assert verdict([best, _verified((0.0, 0.0, 0.5), 0.8)], cfg)[0] == 'ambiguous'
-    status, msg, _ = verdict([_verified((0.0, 0.0, 0.0), cfg.min_score - 0.01)], cfg)
+    assert judge([best, _verified((0.0, 0.0, 0.5), 0.8)])[0] == 'ambiguous'
+    status, msg, _ = judge([_verified((0.0, 0.0, 0.0), cfg.min_score - 0.01)])
     assert status == 'failed' and 'too little' in msg
     through = _verified((0.0, 0.0, 0.0), 0.8)
     through.check = BeamCheck(consistent=0.5, contradicting=cfg.max_contradicting + 0.01,
                               short=0.0)
-    status, msg, _ = verdict([through], cfg)
+    status, msg, _ = judge([through])
     assert status == 'failed' and 'through walls' in msg
     # uncertainty beyond the tolerance along some direction: ambiguous, within it: ok
-    status, msg, _ = verdict([_verified((0.0, 0.0, 0.0), 0.8, 1.5 * cfg.max_position_std)], cfg)
+    status, msg, _ = judge([_verified((0.0, 0.0, 0.0), 0.8, 1.5 * cfg.max_position_std)])
     assert status == 'ambiguous' and msg.startswith('degenerate')
-    assert verdict([_verified((0.0, 0.0, 0.0), 0.8, 0.9 * cfg.max_position_std)], cfg)[0] == 'ok'
+    assert judge([_verified((0.0, 0.0, 0.0), 0.8, 0.9 * cfg.max_position_std)])[0] == 'ok'
+
+
+def test_verdict_asks_the_confidence_once_the_rules_pass():
+    """The same pose: ok on strong evidence, not ok on weak; no evidence at all: failed."""
+    cfg = LocalizerConfig()
+    best = _verified((0.0, 0.0, 0.0), 0.8)
+    status, msg, _, conf = verdict([best], cfg, STRONG)
+    assert status == 'ok' and conf >= cfg.min_confidence and f'confidence {conf:.3f}' in msg
+    weak = dataclasses.replace(STRONG, margin=0.03, through=0.2, unexplained_runs=0.3,
+                               scan_length=4.0, extent=2.0)
+    status, msg, _, conf = verdict([best], cfg, weak)
+    assert status != 'ok' and conf < cfg.min_confidence
+    assert ('low confidence' in msg) if status == 'ambiguous' else ('more likely wrong' in msg)
+    status, _, _, conf = verdict([best], cfg, None)
+    assert status == 'failed' and conf == 0.0
+    # a refused answer reports the rate at which such answers were right when calibrating
+    rival = _verified((5.0, 0.0, 0.0), 0.8)
+    assert verdict([best, rival], cfg, STRONG)[3] == CONFIDENCE_MODEL.refused['rival']
 
 
 def _identical_rooms(n: int = 5, size: float = 3.0, res: float = 0.05) -> OccupancyMap:
@@ -383,6 +416,7 @@ def test_a_scan_of_another_building_is_not_ok(rooms):
         out = loc.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
                                 scan.range_min, scan.range_max)
         assert out.status != 'ok', out.message
+        assert out.confidence < loc.config.min_confidence, out.message
 
 
 def test_float32_and_float64_map_metadata_give_the_same_answers(depot):

@@ -66,8 +66,12 @@ def test_replay_depot_clutter_and_partial_fov(indexed, bag):
 def test_replay_intel_queries(indexed):
     rows, s = _replay('intel_queries', LocalizerConfig(), indexed)
     assert s.n == len(rows) >= 50
-    assert s.success_rate >= 0.97, s.format()
+    # ok needs a calibrated confidence of min_confidence (chosen for 99.9 % precision): a few
+    # right poses on scans with little evidence are now ambiguous (0.2.0: 97 %, no confidence)
+    assert s.success_rate >= 0.90, s.format()
     assert s.precision == 1.0, s.format()
+    assert all(0.0 <= r.confidence <= 1.0 for r in rows)
+    assert all(r.confidence >= LocalizerConfig().min_confidence for r in rows if r.status == 'ok')
     assert s.median_xy_mm <= 35.0, s.format()
 
 

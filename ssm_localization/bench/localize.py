@@ -34,15 +34,17 @@ import time
 import numpy as np
 
 from .peer import ExhaustiveLocalizer
+from .places import (answers_on, data_dir, foreign, load_place, place_grid, real_grid, real_map,
+                     REAL_PLACES, SIM_PLACES, sim_queries)
 from ..config.params import load_configs
-from ..config.simulation import SimulationConfig
-from ..evaluation.plotting import plot_replay
+from ..evaluation.calibration import format_reliability, reliability
+from ..evaluation.plotting import plot_reliability, plot_replay
 from ..evaluation.replay import ResultRow, summarize, within_success
-from ..io.carmen import build_map, CarmenLog, log_scan_records, read_carmen_log
-from ..io.simulate import simulate
+from ..io.carmen import log_scan_records
+from ..io.sensors import EVERYDAY_SENSORS
 from ..localization.localizer import GlobalLocalizer, Hypothesis, Localization
 from ..mapping.index import build_index
-from ..mapping.map_io import load_map_yaml, save_map_yaml
+from ..mapping.map_io import load_map_yaml
 from ..transforms import Pose2
 
 CLUTTER = {'clutter': 8, 'short_fraction': 0.05}
@@ -53,13 +55,17 @@ SIM_SETS = {
     'depot_clutter': ('depot', CLUTTER),
     'depot_fov180': ('depot', {'fov_deg': 180.0}),
 }
-REAL_SETS = {'intel': 'intel', 'aces': 'aces', 'fr079': 'freiburg-079'}
+REAL_SETS = {'intel': 'intel', 'aces': 'aces', 'fr079': 'freiburg-079', 'csail': 'csail',
+             'fhw': 'fhw', 'edmonton': 'edmonton'}
 #: simulated clutter on the maps built from the real logs
-REAL_SIM_SETS = {f'{k}_clutter': (k, CLUTTER) for k in REAL_SETS}
+REAL_SIM_SETS = {f'{k}_clutter': (k, CLUTTER) for k in ('intel', 'aces', 'fr079')}
 DEFAULT_SETS = list(SIM_SETS) + list(REAL_SETS)
 ALL_SETS = DEFAULT_SETS + list(REAL_SIM_SETS)
-#: the sets the defaults were chosen on; every other set is a validation set, only ever measured
-TUNING_SETS = frozenset({'depot', 'depot_clutter', 'depot_fov180', 'intel', 'aces'})
+#: the sets the defaults were chosen on (the localizer's on depot, Intel and ACES; the confidence
+#: model calibrated on Intel, ACES, FHW, depot and the empty room, by
+#: ``scripts/learn_confidence.py``); every other set is a validation set, only ever measured
+TUNING_SETS = frozenset({'depot', 'depot_clutter', 'depot_fov180', 'intel', 'aces', 'fhw',
+                         'empty_room'})
 
 
 def split_of(name: str, tuning: frozenset[str] = TUNING_SETS) -> str:
@@ -81,44 +87,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
     parser.add_argument('--params', help='params YAML applied to every set')
     parser.add_argument('--plot-dir', help='write one replay plot per set here')
-
-
-def _data_dir(arg: str | None) -> Path:
-    if arg:
-        return Path(arg)
-    here = Path(__file__).resolve().parents[2]
-    for cand in (here.parent / 'shared' / 'data', Path.cwd().parent / 'shared' / 'data'):
-        if cand.exists():
-            return cand
-    raise FileNotFoundError('shared data not found; pass --data')
-
-
-def _sim_queries(grid, n: int, seed: int, extra: dict):
-    sim = simulate(grid, SimulationConfig(count=n, seed=seed, **extra))
-    truth = {s.stamp: tuple(float(v) for v in p) for s, p in zip(sim.scans, sim.poses)}
-    return sim.scans, truth
-
-
-def real_map(data: Path, work: Path, name: str):
-    """
-    Return the CARMEN log ``name`` and the map of its even-numbered scans.
-
-    The map is cached in ``work``.
-    """
-    log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
-    return log, real_grid(data, work, name, log)
-
-
-def real_grid(data: Path, work: Path, name: str, log: CarmenLog | None = None):
-    """Return the map of :func:`real_map`; the log is read only to build a map not cached yet."""
-    map_yaml = work / f'{name}_even.yaml'
-    if map_yaml.exists():
-        return load_map_yaml(map_yaml)
-    if log is None:
-        log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
-    grid = build_map(log, indices=range(0, len(log), 2))
-    save_map_yaml(grid, map_yaml)       # creates work/
-    return grid
+    parser.add_argument('--sensors', nargs='+', default=['full'], choices=list(EVERYDAY_SENSORS),
+                        help='also localize every set through these everyday sensors (range cut '
+                             'to 3.5 / 12 m, field of view cut to 90 / 120 deg)')
+    parser.add_argument('--foreign', action='store_true',
+                        help='negative controls: scans of every place on the map of every other '
+                             'place (--foreign-places), --foreign-n a pair; prints the ok rate')
+    places = list(REAL_PLACES) + list(SIM_PLACES)
+    parser.add_argument('--foreign-places', nargs='+', default=places, choices=places)
+    parser.add_argument('--foreign-n', type=int, default=40, help='scans per ordered foreign pair')
+    parser.add_argument('--reliability', metavar='PNG',
+                        help='write the reliability diagram (reported confidence vs observed '
+                             'precision, per split) of every answer of the run')
 
 
 def _real_queries(data: Path, work: Path, name: str, limit: int):
@@ -203,10 +183,10 @@ def run_set(localizer, scans, truth: dict, breakdown: bool = True) -> SetRun:
     return SetRun(rows, covered, stages, spectral)
 
 
-def _line(name: str, label: str, run: SetRun) -> str:
+def _line(name: str, label: str, run: SetRun, split: str | None = None) -> str:
     s = summarize(run.rows)
     cover = f'{np.mean(run.covered):.1%}' if run.covered else 'n/a'
-    return (f'{name:16s} {label:6s} [{split_of(name)[:5]}] n={s.n:4d} ok={s.ok} '
+    return (f'{name:16s} {label:6s} [{(split or split_of(name))[:5]}] n={s.n:4d} ok={s.ok} '
             f'amb={s.ambiguous} fail={s.failed} | '
             f'success {s.success_rate:.1%} precision {s.precision:.2%} | median xy '
             f'{s.median_xy_mm:.1f} mm yaw {s.median_yaw_deg:.2f} deg | 2-sigma coverage {cover} | '
@@ -238,7 +218,7 @@ def run(args: argparse.Namespace) -> int:
     if args.quick:
         args.n, args.real_max = 60, 60
     sets = ALL_SETS if 'all' in args.sets else args.sets
-    data, work = _data_dir(args.data), Path(args.work)
+    data, work = data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg = load_configs(args.params)
     built: dict[tuple[str, str], object] = {}     # (map, localizer kind): built once per map
 
@@ -248,6 +228,7 @@ def run(args: argparse.Namespace) -> int:
         return built[map_name, kind]
 
     pooled: dict[str, list[ResultRow]] = {}
+    sensed: dict[tuple[str, str], list[ResultRow]] = {}
     for name in sets:
         t0 = time.perf_counter()
         if name in REAL_SETS:
@@ -256,11 +237,11 @@ def run(args: argparse.Namespace) -> int:
         elif name in REAL_SIM_SETS:
             map_name, extra = REAL_SIM_SETS[name]
             grid = real_grid(data, work, REAL_SETS[map_name])
-            scans, truth = _sim_queries(grid, args.n, args.seed, extra)
+            scans, truth = sim_queries(grid, args.n, args.seed, extra)
         else:
             map_name, extra = SIM_SETS[name]
             grid = load_map_yaml(data / 'maps' / f'{map_name}.yaml')
-            scans, truth = _sim_queries(grid, args.n, args.seed, extra)
+            scans, truth = sim_queries(grid, args.n, args.seed, extra)
         localizer = once(map_name, 'ssm',
                          lambda: GlobalLocalizer(build_index(grid, index_cfg), loc_cfg))
         index = localizer.index
@@ -268,6 +249,13 @@ def run(args: argparse.Namespace) -> int:
         print(_line(name, 'ssm', ours), flush=True)
         print(_breakdown(ours), flush=True)
         pooled.setdefault(split_of(name), []).extend(ours.rows)
+        for sensor in args.sensors:
+            if sensor == 'full':
+                continue
+            limits = EVERYDAY_SENSORS[sensor]
+            weak = run_set(localizer, [limits.apply(s) for s in scans], truth, breakdown=False)
+            print(_line(f'{name}+{sensor}', 'ssm', weak, split_of(name)), flush=True)
+            sensed.setdefault((split_of(name), sensor), []).extend(weak.rows)
         if args.plot_dir:
             plot_replay(index, ours.rows, Path(args.plot_dir) / f'{name}.png', title=name)
         if args.paper:
@@ -286,4 +274,72 @@ def run(args: argparse.Namespace) -> int:
         print(f'{split} split, pooled: n={s.n} success {s.success_rate:.1%} precision '
               f'{s.precision:.2%} | latency p50 {s.latency_p50_ms:.0f} p95 '
               f'{s.latency_p95_ms:.0f} ms', flush=True)
+    for (split, sensor), rows in sorted(sensed.items(), reverse=True):
+        s = summarize(rows)
+        print(f'{split} split, {sensor}, pooled: n={s.n} success {s.success_rate:.1%} '
+              f'precision {s.precision:.2%}', flush=True)
+    # reliability: every answer with its confidence, right when its pose is within the bounds
+    graded = {split: [(r.confidence, r.correct) for r in rows]
+              for split, rows in pooled.items()}
+    for (split, _), rows in sensed.items():
+        graded[split] += [(r.confidence, r.correct) for r in rows]
+    if args.foreign:
+        for split, pairs in run_foreign(args, data, work, once, index_cfg, loc_cfg).items():
+            graded.setdefault(split, []).extend(pairs)
+    tables = {}
+    for split, pairs in sorted(graded.items(), reverse=True):
+        if pairs:
+            conf, right = zip(*pairs)
+            tables[split] = reliability(conf, right)
+            print(f'reliability, {split} split ({len(pairs)} answers; a bin is judged with '
+                  f'at least 50):', flush=True)
+            print(format_reliability(tables[split]), flush=True)
+    if args.reliability and tables:
+        print(f'wrote {plot_reliability(tables, args.reliability)}')
     return 0
+
+
+def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cfg,
+                loc_cfg) -> dict[str, list[tuple[float, bool]]]:
+    """
+    Localize the scans of every place on the map of every other place; print the ok rates.
+
+    ``--foreign-n`` scans a pair (a seeded choice among the place's odd-numbered scans, or
+    simulated poses), as recorded. A pair is in the tuning split when both places are. Returns
+    the (confidence, right) pairs of every answer by split (never right: the scan is not on
+    that map).
+    """
+    names = args.foreign_places
+    places = {n: load_place(n, data, work, 0 if n in REAL_PLACES else args.foreign_n, seed=7)
+              for n in names}
+    print(f'foreign scans: {args.foreign_n} scans of each place on the map of each other '
+          f'place (ok = a confident pose on a map the scan is not from)', flush=True)
+    counts: dict[str, list[int]] = {}
+    graded: dict[str, list[tuple[float, bool]]] = {}
+    for a in names:
+        grid = place_grid(a, data, work)
+        localizer = once(a, 'ssm', lambda: GlobalLocalizer(build_index(grid, index_cfg),
+                                                           loc_cfg))
+        cells = []
+        for b in names:
+            if not foreign(a, b):
+                continue
+            got = list(answers_on(localizer, a, places[b], limit=args.foreign_n, seed=args.seed))
+            ok = sum(x.ok for x in got)
+            kind = ('real' if a in REAL_PLACES and b in REAL_PLACES else 'simulated') + \
+                   (' tuning' if split_of(a) == split_of(b) == 'tuning' else ' validation')
+            c = counts.setdefault(kind, [0, 0])
+            c[0] += ok
+            c[1] += len(got)
+            split = 'tuning' if split_of(a) == split_of(b) == 'tuning' else 'validation'
+            graded.setdefault(split, []).extend((x.loc.confidence, False) for x in got)
+            cells.append(f'{b} {ok}')
+        print(f'  map {a:16s} [{split_of(a)[:5]}] ok of {args.foreign_n}: ' + ', '.join(cells),
+              flush=True)
+    total = [sum(c[0] for c in counts.values()), sum(c[1] for c in counts.values())]
+    for kind, (ok, n) in sorted(counts.items()):
+        print(f'foreign pairs, {kind} (map and scans both tuning, else validation): ok '
+              f'{ok} of {n} = {ok / max(n, 1):.2%}', flush=True)
+    print(f'foreign pairs, all: ok {total[0]} of {total[1]} = '
+          f'{total[0] / max(total[1], 1):.2%}', flush=True)
+    return graded

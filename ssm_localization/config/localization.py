@@ -80,6 +80,9 @@ class LocalizerConfig:
                                   'through-wall penalty): failed')
     ambiguity_margin: float = param(0.02, 'a distinct rival scoring within this of the best: '
                                           'ambiguous')
+    min_confidence: float = param(0.9, 'a pose that passes the rules is ok only when its '
+                                       'calibrated confidence P(right | evidence) reaches this '
+                                       '(chosen for 99.9 % precision on the calibration split)')
     distinct_xy: float = param(0.5, 'poses further apart than this are distinct, metres')
     distinct_yaw: float = param(math.radians(10.0), '... or than this, rad')
     max_position_std: float = param(0.25, 'a larger reported position std along the weakest '
@@ -114,6 +117,9 @@ class LocalizerConfig:
                        'min_score', 'verify_margin', 'ambiguity_margin', 'min_position_std',
                        'min_yaw_std', 'min_points')
         check_numbers(self, positive, nonnegative)
+        if not 0.0 <= self.min_confidence <= 1.0:
+            raise ValueError(f'LocalizerConfig.min_confidence must be in [0, 1], got '
+                             f'{self.min_confidence!r}')
         if not 0.0 < self.search_ratio <= 1.0:
             raise ValueError(f'LocalizerConfig.search_ratio must be in (0, 1], got '
                              f'{self.search_ratio!r}')

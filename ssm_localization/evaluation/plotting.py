@@ -248,3 +248,30 @@ def plot_soak(samples, warmup_s: float, path: str | Path) -> Path:
     twin.legend(loc='lower right')
     ax.set_title('global_localizer, continuous mode on a looping bag')
     return _save(plt, fig, path, 100)
+
+
+def plot_reliability(tables, path: str | Path, min_count: int = 50) -> Path:
+    """
+    Draw reliability diagrams: mean reported confidence vs fraction right, per bin and split.
+
+    ``tables`` maps a label (a split) to its ``calibration.reliability`` bins; bins with fewer
+    than ``min_count`` answers are drawn hollow. The band around the diagonal is +-2 points.
+    """
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(tables), figsize=(5.0 * len(tables), 5.0), squeeze=False)
+    for ax, (label, bins) in zip(axes[0], tables.items()):
+        ax.fill_between([0, 1], [-0.02, 0.98], [0.02, 1.02], color='0.85', label='+-2 points')
+        ax.plot([0, 1], [0, 1], 'k:', lw=1)
+        used = [b for b in bins if b.count]
+        for b in used:
+            big = b.count >= min_count
+            ax.plot(b.mean_confidence, b.observed, 'o', ms=4 + 3 * np.log10(b.count),
+                    mfc='tab:blue' if big else 'none', mec='tab:blue')
+            ax.annotate(str(b.count), (b.mean_confidence, b.observed), fontsize=7,
+                        xytext=(4, -10), textcoords='offset points')
+        total = sum(b.count for b in used)
+        ax.set(xlim=(-0.02, 1.02), ylim=(-0.02, 1.02), xlabel='reported confidence (bin mean)',
+               ylabel='fraction right', title=f'{label} split: {total} answers')
+        ax.legend(loc='upper left', fontsize=8)
+    fig.tight_layout()
+    return _save(plt, fig, path, dpi=110)

@@ -52,6 +52,7 @@ class ResultRow:
     latency_ms: float
     node: int
     score: float
+    confidence: float = math.nan     # P(right | evidence) as the localizer reported it
     gt_x: float = math.nan
     gt_y: float = math.nan
     gt_yaw: float = math.nan
@@ -62,13 +63,14 @@ class ResultRow:
         """
         Return the row of ``loc`` and its ground truth (None: unknown).
 
-        ``loc``: a Localization or a result with the same pose, status, latency_ms, node and
-        score; ``columns`` fill a subclass's further columns.
+        ``loc``: a Localization or a result with the same pose, status, latency_ms, node, score
+        and confidence; ``columns`` fill a subclass's further columns.
         """
         pose = loc.pose if loc.pose is not None else (math.nan, math.nan, math.nan)
         gt = truth if truth is not None else (math.nan, math.nan, math.nan)
         return cls(stamp=stamp, x=pose[0], y=pose[1], yaw=pose[2], status=loc.status,
                    latency_ms=loc.latency_ms, node=loc.node, score=loc.score,
+                   confidence=float(loc.confidence),
                    gt_x=gt[0], gt_y=gt[1], gt_yaw=gt[2], **columns)
 
     @property

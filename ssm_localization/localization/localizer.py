@@ -38,11 +38,14 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .confidence import confidence
 from .correlative import CorrelativeGrid
+from .evidence import beam_fractions, covariance_stds, endpoint_evidence, Evidence
 from .fusion import lever_arm_covariance
 from .refine import refine_poses, SurfaceModel
 from .verify import BeamCheck, check_beams
 from .voting import alignment_yaws, PoseVoting, Votes
+from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
 from ..config.localization import LocalizerConfig
 from ..mapping.index import MapIndex
 from ..mapping.raycast import RayCaster
@@ -91,13 +94,15 @@ class Query:
     One scan, prepared once.
 
     ``features`` (spatially even points, tangents, descriptors), ``points`` every valid endpoint
-    (laser frame), ``angles`` / ``beams`` the beams for the ray check (``inf`` = no return).
+    (laser frame, sweep order), ``angles`` / ``beams`` the beams for the ray check (``inf`` = no
+    return), ``range_max`` the sensor's range.
     """
 
     features: ScanFeatures
     points: np.ndarray
     angles: np.ndarray
     beams: np.ndarray
+    range_max: float = math.inf     # the sensor's range: a wall nearer should give a return
     _picked: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def picked_beams(self, count: int, max_range: float) -> tuple[np.ndarray, np.ndarray]:
@@ -127,6 +132,8 @@ class Localization:
     latency_ms: float = 0.0
     message: str = ''
     stages: dict[str, float] = field(default_factory=dict)   # milliseconds per stage
+    confidence: float = 0.0                 # P(right | evidence), calibrated (confidence.py)
+    evidence: Evidence | None = None        # what the pose rests on (None: no pose)
 
     @property
     def ok(self) -> bool:
@@ -200,9 +207,11 @@ class GlobalLocalizer:
     The stages are public so the tracker can reuse them on its own hypotheses.
     """
 
-    def __init__(self, index: MapIndex, config: LocalizerConfig | None = None):
+    def __init__(self, index: MapIndex, config: LocalizerConfig | None = None,
+                 confidence_model: ConfidenceModel = CONFIDENCE_MODEL):
         self.index = index
         self.config = cfg = config or LocalizerConfig()
+        self.confidence_model = confidence_model
         self.matcher_config = index.config.matcher
         if len(index.features) == 0:
             raise ValueError('the map index has no nodes: nothing to localize against')
@@ -272,20 +281,29 @@ class GlobalLocalizer:
 
     def prepare_scan(self, ranges, angle_min: float, angle_increment: float,
                      range_min: float = 0.0, range_max: float = float('inf')) -> Query:
-        """Return a :class:`Query` from LaserScan fields; ``ValueError`` for a malformed scan."""
+        """
+        Return a :class:`Query` from LaserScan fields; ``ValueError`` for a malformed scan.
+
+        The beams of the ray check are the readings within ``[range_min, range_max]`` and the
+        ``+inf`` ones (no return, REP 117); NaN, ``-inf`` and finite readings outside the range
+        are no measurement at all and are left out.
+        """
         ranges = np.asarray(ranges, dtype=float).ravel()
         points, _ = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
         angles = angle_min + angle_increment * np.arange(len(ranges))
         with np.errstate(invalid='ignore'):
-            beams = np.where((ranges >= range_min) & (ranges <= range_max), ranges, np.inf)
-            keep = ~np.isnan(ranges) & ~(np.isfinite(ranges) & (ranges > MAX_RANGE))
-        return self.prepare_points(points, angles[keep], beams[keep])
+            keep = (((ranges >= range_min) & (ranges <= min(range_max, MAX_RANGE)))
+                    | (ranges == np.inf))
+        return self.prepare_points(points, angles[keep], ranges[keep], range_max)
 
-    def prepare_points(self, points: np.ndarray, angles: np.ndarray, beams: np.ndarray) -> Query:
+    def prepare_points(self, points: np.ndarray, angles: np.ndarray, beams: np.ndarray,
+                       range_max: float = math.inf) -> Query:
+        """Return a :class:`Query` of laser-frame ``points`` (sweep order) and its beams."""
         if len(points) < self.config.min_points:
             raise ValueError(f'too few valid points ({len(points)} < {self.config.min_points})')
+        limit = float(range_max) if range_max == range_max and range_max > 0 else math.inf
         return Query(features=prepare_scan(points, self.matcher_config), points=points,
-                     angles=angles, beams=beams)
+                     angles=angles, beams=beams, range_max=limit)
 
     def localize_query(self, query: Query, clock: _Clock | None = None) -> Localization:
         """Return the whole pipeline on a prepared query."""
@@ -488,7 +506,7 @@ class GlobalLocalizer:
         expected = self.caster.cast(np.array([h.laser_pose for h in hyps]), angles,
                                     cfg.max_cast_range)
         for h, e in zip(hyps, expected):
-            h.check = check_beams(measured, e, tol=cfg.beam_tolerance)
+            h.check = check_beams(measured, e, tol=cfg.beam_tolerance, range_limit=query.range_max)
             h.score = h.explained - cfg.contradiction_weight * h.check.contradicting
 
     def polish(self, query: Query, h: Hypothesis) -> None:
@@ -516,19 +534,59 @@ class GlobalLocalizer:
         then ``others`` (not refined), for diagnosis (``bench localize`` reads them).
         """
         clock = clock or _Clock()
-        limit = self.config.max_contradicting
+        cfg = self.config
+        limit = cfg.max_contradicting
         checked = sorted((h for h in hyps if h.check is not None),
                          key=lambda h: (h.contradicting > limit, -h.score))
         if not checked:
             return self._failed(clock, 'no verified hypothesis')
         best = checked[0]
+        rival = self.best_rival(query, best, hyps)
         self.polish(query, best)
-        status, message, cov = verdict(checked, self.config)
+        evidence = self.evidence(query, best, rival)
+        status, message, cov, conf = verdict(checked, cfg, evidence, self.confidence_model)
+        clock.lap('decide')
         return Localization(status=status, pose=best.pose, covariance=cov, node=best.node,
                             score=best.score, message=message, latency_ms=clock.total_ms,
-                            stages=clock.stages,
-                            candidates=checked + [h for h in hyps if h.check is None]
-                            + list(others))
+                            stages=clock.stages, confidence=conf, evidence=evidence,
+                            candidates=checked + [h for h in hyps if h.check is not None
+                                                  and all(h is not c for c in checked)]
+                            + [h for h in hyps if h.check is None] + list(others))
+
+    def best_rival(self, query: Query, best: Hypothesis, hyps: list[Hypothesis]) -> float:
+        """
+        Return the score of the best place distinct from ``best`` (0 when there is none).
+
+        The refined hypothesis distinct from ``best`` that explains most of the scan is verified
+        if it was not yet, so the margin of the answer (``evidence.py``) is always measured
+        against a ray-cast rival.
+        """
+        cfg = self.config
+        others = [h for h in hyps if h is not best and h.refined
+                  and distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)]
+        if not others:
+            return 0.0
+        top = max(others, key=lambda h: h.explained)
+        if top.check is None:
+            self.verify(query, [top])
+        return max(h.score for h in others if h.check is not None)
+
+    def evidence(self, query: Query, h: Hypothesis, rival: float) -> Evidence:
+        """Return the evidence for the verified ``h``; its best distinct rival scores ``rival``."""
+        check = h.check
+        if check is None:
+            raise ValueError('evidence needs a verified hypothesis (ray-cast beam check)')
+        hit, through, short = beam_fractions(check)
+        on_wall, unknown, runs, length = endpoint_evidence(
+            self.surface, self.index.map, h.laser_pose, query.points, h.depth)
+        position_std, yaw_std = covariance_stds(h.covariance)
+        even = query.features.points
+        extent = float(np.percentile(np.hypot(even[:, 0], even[:, 1]), 90)) if len(even) else 0.0
+        return Evidence(hit=hit, through=through, short=short,
+                        missing=check.missing / max(check.beams, 1), on_wall=on_wall,
+                        unknown=unknown, unexplained_runs=runs, explained=h.explained,
+                        margin=h.score - rival, position_std=position_std, yaw_std=yaw_std,
+                        returns=check.returns, scan_length=length, extent=extent)
 
     def report_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
         """Return the Gauss-Newton laser covariance, scaled and floored, propagated to the base."""
@@ -590,26 +648,33 @@ def _evenly(points: np.ndarray, count: int) -> np.ndarray:
     return points[np.linspace(0, len(points) - 1, count).astype(int)]
 
 
-def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig) -> tuple[str, str, np.ndarray]:
+def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence | None = None,
+            model: ConfidenceModel = CONFIDENCE_MODEL) -> tuple[str, str, np.ndarray, float]:
     """
-    ``(status, message, covariance)`` for verified hypotheses, plausible ones first, then by score.
+    ``(status, message, covariance, confidence)`` for verified hypotheses, plausible ones first.
 
+    First the rules a pose must pass whatever the evidence says:
     ``failed`` when even the best has more than ``max_contradicting`` of its beams seeing through
     walls, or explains too little of the scan (score below ``min_score``);
     ``ambiguous`` when a distinct pose scores within ``ambiguity_margin`` of it (the covariance
     then spans them) or when its position is undetermined beyond ``max_position_std`` along some
-    direction (2 sigma beyond the 0.5 m success tolerance: a bare corridor); else ``ok``.
+    direction (2 sigma beyond the 0.5 m success tolerance: a bare corridor).
+    Then the calibrated ``confidence`` = ``P(right | evidence)`` (``confidence.py``): ``ok`` when
+    it reaches ``min_confidence``, else ``ambiguous`` (at least 0.5: more likely right than not)
+    or ``failed``. An answer the rules refuse reports the rate at which such answers were right
+    on the calibration split (``ConfidenceModel.refused``).
     """
     best = ranked[0]
     cov = best.covariance if best.covariance is not None else np.diag([1e3, 1e3, 1e3])
     if best.contradicting > cfg.max_contradicting:
         return 'failed', (f'no pose agrees with the map: at the best, {best.contradicting:.0%} of '
                           f'the beams see through walls (> {cfg.max_contradicting:.0%})'), \
-            _inflated(cov)
+            _inflated(cov), model.refused['implausible']
     if best.score < cfg.min_score:
         return 'failed', (f'the best pose explains too little of the scan (explained '
                           f'{best.explained:.0%}, through walls {best.contradicting:.0%}: '
-                          f'score {best.score:.2f} < {cfg.min_score})'), _inflated(cov)
+                          f'score {best.score:.2f} < {cfg.min_score})'), _inflated(cov), \
+            model.refused['implausible']
     rivals = [h for h in ranked[1:]
               if distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)
               and h.score >= best.score - cfg.ambiguity_margin]
@@ -618,13 +683,20 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig) -> tuple[str, str, n
         cov = cov + np.diag([*np.var(spread[:, :2], axis=0), np.pi ** 2 / 3.0])
         return 'ambiguous', (f'{len(rivals) + 1} distinct poses fit about equally well '
                              f'(scores {best.score:.2f} and '
-                             f'{max(h.score for h in rivals):.2f})'), cov
+                             f'{max(h.score for h in rivals):.2f})'), cov, model.refused['rival']
     std = position_std(cov)
     if std > cfg.max_position_std:
         return 'ambiguous', (f'degenerate geometry (e.g. a corridor): position std {std:.2f} m '
-                             f'along the weakest direction'), cov
-    return 'ok', (f'explained {best.explained:.0%}, through walls {best.contradicting:.0%}, '
-                  f'position std {std * 1e3:.0f} mm'), cov
+                             f'along the weakest direction'), cov, model.refused['degenerate']
+    conf = confidence(evidence, model)
+    facts = (f'explained {best.explained:.0%}, through walls {best.contradicting:.0%}, '
+             f'position std {std * 1e3:.0f} mm, confidence {conf:.3f}')
+    if conf >= cfg.min_confidence:
+        return 'ok', facts, cov, conf
+    if conf >= 0.5:
+        return 'ambiguous', f'low confidence (< {cfg.min_confidence}): {facts}', cov, conf
+    return ('failed', f'the best pose is more likely wrong than right: {facts}', _inflated(cov),
+            conf)
 
 
 def position_std(cov: np.ndarray | None) -> float:

@@ -36,12 +36,14 @@ track from a given pose, which the next scan verifies like any other prediction.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import time
 
 import numpy as np
 
+from .confidence import confidence
+from .evidence import covariance_stds, Evidence
 from .fusion import fuse_weak, lever_arm_covariance, mahalanobis2
 from .localizer import (distinct, GlobalLocalizer, Hypothesis, Localization, position_std,
                         Query, STATUSES)
@@ -75,6 +77,8 @@ class TrackResult:
     message: str = ''
     predicted: Pose2 | None = None
     localization: Localization | None = None    # the global answer, when global localization ran
+    confidence: float = 0.0                     # P(right | evidence), as for a Localization
+    evidence: Evidence | None = None            # what the pose rests on
 
     @property
     def ok(self) -> bool:
@@ -85,7 +89,8 @@ class TrackResult:
         """Return the answer as a :class:`Localization` (what the nodes publish and report)."""
         glob = self.localization
         return Localization(status=self.status, pose=self.pose, covariance=self.covariance,
-                            node=self.node, score=self.score,
+                            node=self.node, score=self.score, confidence=self.confidence,
+                            evidence=self.evidence,
                             candidates=list(glob.candidates) if glob is not None else [],
                             latency_ms=self.latency_ms, message=f'{self.mode}: {self.message}')
 
@@ -100,6 +105,8 @@ class _Attempt:
     covariance: np.ndarray | None = None
     score: float = math.nan
     truncated: bool = False      # the prediction's uncertainty reached beyond the window
+    confidence: float = 0.0      # P(right | evidence) of the tracked pose
+    evidence: Evidence | None = None
 
 
 class Tracker:
@@ -263,8 +270,17 @@ class Tracker:
         fused = self._verified(query, best, pose)
         if not self._plausible(fused):
             fused, pose, cov = best, best.pose, best.covariance     # the scan's own pose
-        common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated}
         lc = loc.config
+        # the evidence of the tracked pose, judged as a global answer is (the prediction's
+        # part: the fused covariance; rivals: the distinct poses verified in the window)
+        others = [h.score for h in verified if h is not best
+                  and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)]
+        evidence = loc.evidence(query, fused, max(others, default=0.0))
+        evidence = replace(evidence, **dict(zip(('position_std', 'yaw_std'),
+                                                covariance_stds(cov))))
+        conf = confidence(evidence, loc.confidence_model)
+        common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated,
+                  'confidence': conf, 'evidence': evidence}
         rivals = [h for h in contenders if h is not best
                   and prior[id(h)] <= prior[id(best)] + cfg.rival_prior_chi2
                   and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)
@@ -277,9 +293,14 @@ class Tracker:
         if std_xy > cfg.max_position_std:
             return _Attempt('ambiguous', f'position std {std_xy:.2f} m along the weakest '
                                          f'direction even with the prediction', **common)
-        return _Attempt('ok', f'tracked: explained {best.explained:.0%}, through walls '
-                              f'{fused.contradicting:.0%}, position std {std_xy * 1e3:.0f} mm',
-                        **common)
+        facts = (f'explained {best.explained:.0%}, through walls {fused.contradicting:.0%}, '
+                 f'position std {std_xy * 1e3:.0f} mm, confidence {conf:.3f}')
+        if conf < 0.5:
+            return _Attempt('failed', f'the tracked pose is more likely wrong than right: {facts}',
+                            **common)
+        if conf < lc.min_confidence:
+            return _Attempt('ambiguous', f'tracked with low confidence: {facts}', **common)
+        return _Attempt('ok', f'tracked: {facts}', **common)
 
     def _plausible(self, h: Hypothesis) -> bool:
         """Tell whether a verified pose explains enough of the scan, few beams through walls."""
@@ -358,7 +379,8 @@ class Tracker:
         return self._result(t0, stamp, 'ambiguous', attempt.pose, why + f'global localization '
                             f'{glob.status}: {glob.message}', covariance=attempt.covariance,
                             score=attempt.score, predicted=pred, mode='tracked',
-                            localization=glob)
+                            localization=glob, confidence=min(attempt.confidence, 0.5),
+                            evidence=attempt.evidence)
 
     def _keep(self, t0: float, stamp: float, attempt: _Attempt, pred: Pose2, message: str,
               glob: Localization | None = None) -> TrackResult:
@@ -368,7 +390,8 @@ class Tracker:
             self._remember(attempt.score)
         return self._result(t0, stamp, attempt.status, attempt.pose, message,
                             covariance=attempt.covariance, score=attempt.score, predicted=pred,
-                            mode='tracked', localization=glob)
+                            mode='tracked', localization=glob, confidence=attempt.confidence,
+                            evidence=attempt.evidence)
 
     def _adopt(self, t0: float, stamp: float, glob: Localization, message: str,
                pred: Pose2 | None) -> TrackResult:
@@ -379,7 +402,8 @@ class Tracker:
         self.relocalizations += 1
         return self._result(t0, stamp, 'ok', glob.pose, message + glob.message,
                             covariance=glob.covariance, score=glob.score, node=glob.node,
-                            predicted=pred, mode='relocalized', localization=glob)
+                            predicted=pred, mode='relocalized', localization=glob,
+                            confidence=glob.confidence, evidence=glob.evidence)
 
     def _remember(self, score: float) -> None:
         self._recent.append(score)
@@ -400,7 +424,8 @@ class Tracker:
         return self._result(t0, stamp, glob.status, glob.pose if glob.pose is not None else pred,
                             f'{why}global localization {glob.status}: {glob.message}',
                             covariance=glob.covariance, score=glob.score, node=glob.node,
-                            predicted=pred, mode='lost', localization=glob)
+                            predicted=pred, mode='lost', localization=glob,
+                            confidence=glob.confidence, evidence=glob.evidence)
 
     def _miss(self) -> None:
         """Count a scan without a verified pose; too many in a row and the track is dropped."""

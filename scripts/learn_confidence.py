@@ -1,0 +1,192 @@
+#!/usr/bin/env python3
+"""
+Calibrate the confidence ``P(right | evidence)`` of the localizer's answers (logistic regression).
+
+Labelled answers (``bench/places.py``) on the *calibration split* only -- the real buildings
+Intel, ACES and FHW and the simulated depot and empty room; Freiburg 079, CSAIL, Edmonton and
+the TurtleBot3 maps are the validation split, never looked at here:
+- own scans: ``--own`` odd-numbered scans per building (random poses on the simulated maps),
+  each through the five sensors of ``io/sensors.py`` (as recorded, 3.5 m and 12 m range, 90 and
+  120 deg field of view); right when the pose lies within 0.5 m / 5 deg of the truth;
+- foreign scans: ``--foreign`` scans of every other place of the split on each map, as recorded,
+  at 3.5 m and at 120 deg; never right.
+Every answer comes from the localizer with ``min_confidence`` 0, so that its status says whether
+the rules alone accept the pose. The model is fitted on the answers the rules accept (those are
+the ones it decides); an answer the rules refuse reports the rate at which such answers were
+right here, by reason. Prints the fit, a table of thresholds (precision of the own answers, ``ok``
+rate of the foreign ones) and the reliability of the fitted probabilities; writes
+``config/confidence_model.yaml``. Copy the printed model into
+``ssm_localization/config/confidence.py:CONFIDENCE_MODEL`` (a test checks the two agree) and pick
+``LocalizerConfig.min_confidence`` from the table.
+
+Usage::
+
+    .venv/bin/python scripts/learn_confidence.py --data ../shared/data [--work bench_data]
+"""
+from __future__ import annotations
+
+import argparse
+from collections import Counter
+import dataclasses
+import datetime
+import json
+from pathlib import Path
+import sys
+import time
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from ssm_localization.bench.places import (answers_on, foreign, load_place,  # noqa: E402
+                                           REAL_PLACES)
+from ssm_localization.config.localization import LocalizerConfig  # noqa: E402
+from ssm_localization.evaluation.calibration import (fit_confidence,  # noqa: E402
+                                                     format_reliability, reliability)
+from ssm_localization.io.sensors import EVERYDAY_SENSORS  # noqa: E402
+from ssm_localization.localization.confidence import feature_values  # noqa: E402
+from ssm_localization.localization.localizer import GlobalLocalizer  # noqa: E402
+from ssm_localization.mapping.index import build_index  # noqa: E402
+import yaml  # noqa: E402, I100
+
+CALIBRATION = ('intel', 'aces', 'fhw', 'depot', 'empty_room')
+#: 'hit' is left out (hit + through + short = 1 over the returns), and so is the count of returns
+#: (the scan's length and extent say how much it sees, independently of the beam count)
+FEATURES = ('through', 'short', 'missing', 'on_wall', 'unknown', 'unexplained_runs', 'explained',
+            'margin', 'log_position_std', 'log_yaw_std', 'log_scan_length', 'log_extent')
+FOREIGN_SENSORS = ('full', 'range3.5', 'fov120')
+THRESHOLDS = (0.5, 0.7, 0.8, 0.85, 0.9, 0.93, 0.95, 0.97, 0.98, 0.99)
+
+
+def refusal(answer) -> str:
+    """Return why the rules refused an answer (``min_confidence`` 0: every refusal is a rule's)."""
+    if answer.status == 'failed':
+        return 'implausible'
+    return 'degenerate' if answer.message.startswith('degenerate') else 'rival'
+
+
+@dataclasses.dataclass(frozen=True)
+class Labelled:
+    """What the fit needs of one answer (kept in ``--cache`` to refit without localizing)."""
+
+    map: str                  # noqa: A003
+    source: str
+    sensor: str
+    status: str
+    message: str
+    right: bool
+    values: dict | None       # feature_values of its evidence; None: no pose
+
+    @property
+    def own(self) -> bool:
+        return self.map == self.source
+
+    @property
+    def ok(self) -> bool:
+        return self.status == 'ok'
+
+
+def collect(args) -> list[Labelled]:
+    """Localize the calibration split's answers (or read them from ``--cache``)."""
+    if args.cache and args.cache.exists() and not args.fresh:
+        return [Labelled(**d) for d in json.loads(args.cache.read_text())]
+    answers = [Labelled(a.map, a.source, a.sensor, a.loc.status, a.loc.message, a.right,
+                        feature_values(a.loc.evidence) if a.loc.evidence is not None else None)
+               for a in localize(args)]
+    if args.cache:
+        args.cache.parent.mkdir(parents=True, exist_ok=True)
+        args.cache.write_text(json.dumps([dataclasses.asdict(a) for a in answers]))
+    return answers
+
+
+def localize(args) -> list:
+    places = {name: load_place(name, args.data, args.work,
+                               args.own if name in REAL_PLACES else args.sim)
+              for name in CALIBRATION}
+    config = LocalizerConfig(min_confidence=0.0)
+    answers = []
+    for name in CALIBRATION:
+        t0 = time.perf_counter()
+        localizer = GlobalLocalizer(build_index(places[name].grid), config)
+        answers += answers_on(localizer, name, places[name], tuple(EVERYDAY_SENSORS))
+        for other in CALIBRATION:
+            if foreign(name, other):
+                answers += answers_on(localizer, name, places[other], FOREIGN_SENSORS,
+                                      limit=args.foreign, seed=args.seed)
+        print(f'{name}: {len(answers)} answers so far ({time.perf_counter() - t0:.0f} s)',
+              flush=True)
+    return answers
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--data', type=Path, default=Path('..') / 'shared' / 'data')
+    ap.add_argument('--work', type=Path, default=Path('bench_data'))
+    ap.add_argument('--own', type=int, default=150, help='own scans per real building')
+    ap.add_argument('--sim', type=int, default=150, help='own scans per simulated map')
+    ap.add_argument('--foreign', type=int, default=40, help='scans per ordered foreign pair')
+    ap.add_argument('--l2', type=float, default=10.0)
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--out', type=Path, default=ROOT / 'config' / 'confidence_model.yaml')
+    ap.add_argument('--cache', type=Path, default=Path('bench_data') / 'confidence_answers.json',
+                    help='labelled answers are kept here; a later run refits from them')
+    ap.add_argument('--fresh', action='store_true', help='localize again even if cached')
+    args = ap.parse_args(argv)
+    answers = collect(args)
+    with_pose = [a for a in answers if a.values is not None]
+    accepted = [a for a in with_pose if a.ok]
+    refused: dict[str, float] = {}
+    for reason in ('implausible', 'rival', 'degenerate'):
+        these = [a for a in with_pose if not a.ok and refusal(a) == reason]
+        refused[reason] = round(sum(a.right for a in these) / len(these), 4) if these else 0.0
+        print(f'refused ({reason}): {len(these)} answers, right {refused[reason]:.3f}')
+    values = [a.values for a in accepted]
+    labels = [a.right for a in accepted]
+    model = fit_confidence(values, labels, FEATURES, l2=args.l2, refused=refused,
+                           split='calibration: ' + ', '.join(CALIBRATION))
+    p = np.array([model.probability(v) for v in values])
+    print(f'{len(accepted)} answers the rules accept ({sum(labels)} right); weights on '
+          f'standardised features:')
+    for name, w in zip(model.features, model.weights):
+        print(f'  {name:18s} {w:+.3f}')
+    real_own = np.array([a.own and a.map in REAL_PLACES for a in accepted])
+    own_full = [a for a in answers if a.own and a.map in REAL_PLACES and a.sensor == 'full']
+    n_foreign = Counter(a.sensor for a in answers if not a.own)
+    print('threshold | own real (all sensors): ok, wrong ok, precision | own real full scans: '
+          'success | foreign: ok rate by sensor')
+    index = {id(a): k for k, a in enumerate(accepted)}
+    for t in THRESHOLDS:
+        ok = p >= t
+        own_ok = ok & real_own
+        wrong = int(np.sum(own_ok & ~np.array(labels)))
+        succ = sum(a.right and id(a) in index and p[index[id(a)]] >= t for a in own_full)
+        fok = Counter(a.sensor for a, k in zip(accepted, ok) if k and not a.own)
+        rates = ', '.join(f'{s} {fok[s] / max(n_foreign[s], 1):.2%}' for s in FOREIGN_SENSORS)
+        print(f'  {t:.2f} | {int(own_ok.sum())}, {wrong}, '
+              f'{1 - wrong / max(int(own_ok.sum()), 1):.4f} | '
+              f'{succ / max(len(own_full), 1):.3f} | {rates}')
+    for t in (0.85, 0.9, 0.95):
+        per = []
+        for b in sorted({a.map for a in own_full}):
+            mine = [a for a in own_full if a.map == b]
+            got = sum(a.right and id(a) in index and p[index[id(a)]] >= t for a in mine)
+            per.append(f'{b} {got}/{len(mine)}')
+        print(f'  own full scans right and ok at {t}: ' + ', '.join(per))
+    print('reliability of the fitted probabilities (answers the rules accept):')
+    print(format_reliability(reliability(p, labels)))
+    doc = {'fitted_by': 'scripts/learn_confidence.py',
+           'date': datetime.date.today().isoformat(),
+           'answers': len(accepted), 'right': int(sum(labels)),
+           'model': {k: (list(v) if isinstance(v, tuple) else v)
+                     for k, v in dataclasses.asdict(model).items()}}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    header = '# The confidence model P(right | evidence); see scripts/learn_confidence.py\n'
+    args.out.write_text(header + yaml.safe_dump(doc, sort_keys=False))
+    print(f'wrote {args.out}')
+    print('CONFIDENCE_MODEL = ' + repr(model))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

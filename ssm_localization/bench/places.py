@@ -1,0 +1,161 @@
+"""
+The benchmarks' places and labelled answers (shared data found by ``--data``).
+
+A *place* is a map with query scans and their ground truth: a real building (the map of the
+even-numbered scans of its CARMEN log, the odd-numbered scans as queries) or a simulated map
+(random poses, 360 beams, 10 mm noise: the paper's protocol). An *answer* is one query localized
+on one place's map and labelled:
+- ``own``: the place's own scans, right when ``ok``-or-not the pose lies within 0.5 m / 5 deg;
+- ``foreign``: scans of another place, never right (they are not on this map at all).
+Each can be taken through an everyday sensor first (``io/sensors.py``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from ..config.simulation import SimulationConfig
+from ..evaluation.replay import within_success
+from ..io.bag_records import ScanRecord
+from ..io.carmen import build_map, CarmenLog, log_scan_records, read_carmen_log
+from ..io.sensors import EVERYDAY_SENSORS, SensorLimits
+from ..io.simulate import simulate
+from ..localization.localizer import GlobalLocalizer, Localization
+from ..mapping.map_io import load_map_yaml, OccupancyMap, save_map_yaml
+from ..transforms import Pose2
+
+#: the shared logs, by short name
+REAL_PLACES = {'intel': 'intel', 'aces': 'aces', 'fr079': 'freiburg-079', 'csail': 'csail',
+               'fhw': 'fhw', 'edmonton': 'edmonton'}
+#: the shared nav2 maps
+SIM_PLACES = ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room')
+#: maps of one and the same place (TurtleBot3's world and sandbox): never foreign to each other
+SAME_PLACE = (frozenset({'tb3_sandbox', 'turtlebot3_world'}),)
+
+
+def data_dir(arg: str | None) -> Path:
+    if arg:
+        return Path(arg)
+    here = Path(__file__).resolve().parents[2]
+    for cand in (here.parent / 'shared' / 'data', Path.cwd().parent / 'shared' / 'data'):
+        if cand.exists():
+            return cand
+    raise FileNotFoundError('shared data not found; pass --data')
+
+
+def sim_queries(grid, n: int, seed: int, extra: dict):
+    sim = simulate(grid, SimulationConfig(count=n, seed=seed, **extra))
+    truth = {s.stamp: tuple(float(v) for v in p) for s, p in zip(sim.scans, sim.poses)}
+    return sim.scans, truth
+
+
+def real_map(data: Path, work: Path, name: str):
+    """
+    Return the CARMEN log ``name`` and the map of its even-numbered scans.
+
+    The map is cached in ``work``.
+    """
+    log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
+    return log, real_grid(data, work, name, log)
+
+
+def real_grid(data: Path, work: Path, name: str, log: CarmenLog | None = None):
+    """Return the map of :func:`real_map`; the log is read only to build a map not cached yet."""
+    map_yaml = work / f'{name}_even.yaml'
+    if map_yaml.exists():
+        return load_map_yaml(map_yaml)
+    if log is None:
+        log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
+    grid = build_map(log, indices=range(0, len(log), 2))
+    save_map_yaml(grid, map_yaml)       # creates work/
+    return grid
+
+
+@dataclass(frozen=True)
+class Place:
+    """A map and query scans with their ground truth (base poses in the map frame)."""
+
+    name: str
+    grid: OccupancyMap
+    scans: list[ScanRecord]
+    truth: list[Pose2]
+
+
+@dataclass(frozen=True)
+class Answer:
+    """One labelled answer: which map, whose scans, through which sensor, and what came out."""
+
+    map: str                 # noqa: A003 - the place whose map was used
+    source: str              # the place whose scan it is
+    sensor: str
+    loc: Localization
+    right: bool              # the pose lies within the success bounds of the truth
+
+    @property
+    def own(self) -> bool:
+        return self.map == self.source
+
+    @property
+    def ok(self) -> bool:
+        return self.loc.status == 'ok'
+
+
+def foreign(a: str, b: str) -> bool:
+    """Tell whether scans of place ``b`` are foreign to the map of place ``a``."""
+    return a != b and not any({a, b} <= s for s in SAME_PLACE)
+
+
+def load_place(name: str, data: Path, work: Path, count: int, seed: int = 1) -> Place:
+    """
+    Return the place ``name`` with ``count`` queries.
+
+    Real: ``count`` odd-numbered scans evenly spread over the log (0: all); simulated: ``count``
+    random poses (seeded).
+    """
+    if name in REAL_PLACES:
+        log, grid = real_map(data, work, REAL_PLACES[name])
+        odd = list(range(1, len(log), 2))
+        if count and len(odd) > count:
+            step = len(odd) / count
+            odd = [odd[int(i * step)] for i in range(count)]
+        return Place(name, grid, log_scan_records(log, odd),
+                     [tuple(float(v) for v in log.poses[k]) for k in odd])
+    if name in SIM_PLACES:
+        grid = load_map_yaml(data / 'maps' / f'{name}.yaml')
+        scans, truth = sim_queries(grid, count, seed, {})
+        return Place(name, grid, scans, [truth[s.stamp] for s in scans])
+    raise ValueError(f'unknown place {name!r} (real: {sorted(REAL_PLACES)}, simulated: '
+                     f'{list(SIM_PLACES)})')
+
+
+def place_grid(name: str, data: Path, work: Path) -> OccupancyMap:
+    """Return the map of place ``name`` alone (cached for the real ones)."""
+    if name in REAL_PLACES:
+        return real_grid(data, work, REAL_PLACES[name])
+    return load_map_yaml(data / 'maps' / f'{name}.yaml')
+
+
+def answers_on(localizer: GlobalLocalizer, map_name: str, place: Place,
+               sensors: Sequence[str] = ('full',), limit: int = 0,
+               seed: int = 0) -> Iterator[Answer]:
+    """
+    Localize the scans of ``place`` on ``localizer``'s map (that of ``map_name``).
+
+    Own scans are labelled against their truth; foreign ones are never right. ``limit`` > 0
+    takes that many of the place's scans (a seeded random choice, the same for every map).
+    """
+    own = map_name == place.name
+    picks = np.arange(len(place.scans))
+    if limit and len(picks) > limit:
+        picks = np.sort(np.random.default_rng(seed).choice(picks, limit, replace=False))
+    for sensor in sensors:
+        limits: SensorLimits = EVERYDAY_SENSORS[sensor]
+        for k in picks:
+            scan = limits.apply(place.scans[k])
+            loc = localizer.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                                          scan.range_min, scan.range_max)
+            right = own and within_success(loc.pose, place.truth[k])
+            yield Answer(map_name, place.name, sensor, loc, right)

@@ -1,0 +1,52 @@
+"""
+``P(right | evidence)``: the calibrated confidence reported with every answer (beyond the paper).
+
+The model (``config/confidence.py``) is a logistic regression on the features below, fitted by
+``scripts/learn_confidence.py`` on labelled answers of the calibration buildings and checked on
+buildings it never saw (``bench localize`` prints the reliability of its probabilities and
+draws the diagram). A status of ``ok`` needs at least ``LocalizerConfig.min_confidence``.
+"""
+from __future__ import annotations
+
+import math
+
+from .evidence import Evidence
+from ..config.confidence import ConfidenceModel
+
+#: the margin to the best distinct rival is clipped to this (a larger lead adds nothing)
+MAX_MARGIN = 1.0
+
+
+def feature_values(ev: Evidence) -> dict[str, float]:
+    """
+    Return the model's inputs made from the evidence of one answer.
+
+    Fractions as they are; the margin clipped to +-:data:`MAX_MARGIN`; standard deviations and
+    the count of returns on a log scale (their effect is one of ratios).
+    """
+    return {
+        'hit': ev.hit,
+        'through': ev.through,
+        'short': ev.short,
+        'missing': ev.missing,
+        'on_wall': ev.on_wall,
+        'unknown': ev.unknown,
+        'unexplained_runs': ev.unexplained_runs,
+        'explained': ev.explained,
+        'margin': max(-MAX_MARGIN, min(MAX_MARGIN, ev.margin)),
+        'log_position_std': math.log(max(ev.position_std, 1e-3)),
+        'log_yaw_std': math.log(max(ev.yaw_std, 1e-4)),
+        'log_returns': math.log(max(ev.returns, 1)),
+        'log_scan_length': math.log(max(ev.scan_length, 0.5)),
+        'log_extent': math.log(max(ev.extent, 0.1)),
+    }
+
+
+def confidence(ev: Evidence | None, model: ConfidenceModel) -> float:
+    """Return ``P(right | evidence)`` of one answer (0 when there is no evidence: no pose)."""
+    if ev is None:
+        return 0.0
+    values = feature_values(ev)
+    if not all(math.isfinite(v) for v in values.values()):
+        return 0.0
+    return model.probability(values)
