@@ -23,7 +23,8 @@ from ..files.writing import atomic_files
 from ..files.yaml_input import load_yaml_file
 from ..transforms import apply, planar_yaw
 
-MODES = ('trinary', 'scale', 'raw')
+#: how map_server reads the image's pixels (the map YAML's ``mode``)
+MAP_IMAGE_MODES = ('trinary', 'scale', 'raw')
 
 
 #: largest magnitude of the resolution and origin: nav_msgs/OccupancyGrid carries them as float32
@@ -204,8 +205,9 @@ def load_map_yaml(path: str | Path, max_cells: int = MAX_MAP_CELLS) -> Occupancy
         raise ValueError(f'{path}: free_thresh ({free_t}) must not exceed occupied_thresh '
                          f'({occ_t})')
     mode = doc.get('mode', 'trinary')
-    if mode not in MODES:
-        raise ValueError(f"{path}: field 'mode' must be one of {MODES}, got {echo(mode)}")
+    if mode not in MAP_IMAGE_MODES:
+        raise ValueError(f"{path}: field 'mode' must be one of {MAP_IMAGE_MODES}, "
+                         f'got {echo(mode)}')
     img_path = Path(image)
     if not img_path.is_absolute():
         img_path = path.parent / img_path
