@@ -40,7 +40,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
-from .map_io import OccupancyMap
+from .occupancy import OccupancyMap
 from ..config.mapping import TopologyConfig
 from ..progress import ProgressCallback
 
