@@ -33,6 +33,7 @@ import time
 
 import numpy as np
 
+from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer
 from ..config.params import load_configs
 from ..config.simulation import SimulationConfig
@@ -77,20 +78,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--peer', action='store_true',
                         help='also run the exhaustive correlative search on the same queries')
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--data', default=None, help='shared data dir (default ../shared/data)')
+    parser.add_argument('--data', default=None, help=DATA_HELP)
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
     parser.add_argument('--params', help='params YAML applied to every set')
     parser.add_argument('--plot-dir', help='write one replay plot per set here')
-
-
-def _data_dir(arg: str | None) -> Path:
-    if arg:
-        return Path(arg)
-    here = Path(__file__).resolve().parents[2]
-    for cand in (here.parent / 'shared' / 'data', Path.cwd().parent / 'shared' / 'data'):
-        if cand.exists():
-            return cand
-    raise FileNotFoundError('shared data not found; pass --data')
 
 
 def _sim_queries(grid, n: int, seed: int, extra: dict):
@@ -238,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
     if args.quick:
         args.n, args.real_max = 60, 60
     sets = ALL_SETS if 'all' in args.sets else args.sets
-    data, work = _data_dir(args.data), Path(args.work)
+    data, work = data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg = load_configs(args.params)
     built: dict[tuple[str, str], object] = {}     # (map, localizer kind): built once per map
 

@@ -33,7 +33,8 @@ import time
 import numpy as np
 from tqdm import tqdm
 
-from .localize import _data_dir, real_map, REAL_SETS, split_of
+from .data import data_dir, DATA_HELP
+from .localize import real_map, REAL_SETS, split_of
 from ..config.params import load_all_configs
 from ..evaluation.plotting import plot_track
 from ..evaluation.replay import replay_scans, summarize
@@ -71,7 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--random-kidnaps', type=int, default=0, metavar='N',
                         help='also N random kidnaps per log (wrong ok after them, recovery)')
     parser.add_argument('--seed', type=int, default=1, help='seed of the random kidnaps')
-    parser.add_argument('--data', default=None, help='shared data dir (default ../shared/data)')
+    parser.add_argument('--data', default=None, help=DATA_HELP)
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
     parser.add_argument('--params', help='params YAML applied to every set (index, localizer '
                                          'and tracker sections)')
@@ -139,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     if args.quick:
         args.scans = 200
     sets = list(REAL_SETS) if 'all' in args.sets else args.sets
-    data, work = _data_dir(args.data), Path(args.work)
+    data, work = data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg, track_cfg = load_all_configs(args.params)
     for name in sets:
         t0 = time.perf_counter()
