@@ -20,7 +20,7 @@ precision (right / answered ok), the median position error of the ok answers, th
 coverage (right ok answers whose position error lies inside the reported 2-sigma ellipse), latency
 p50 / p95, and where the misses were lost (:func:`miss_stage`); ``--paper`` adds the plain paper
 pipeline, ``--peer`` the exhaustive correlative search of ``bench/peer.py`` on the same queries,
-with the ratios the issue asks for.
+with the ratio of their p95 latencies.
 """
 from __future__ import annotations
 

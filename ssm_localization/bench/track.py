@@ -1,5 +1,5 @@
 """
-``ssm_localization bench track``: tracking with odometry, kidnaps and relocalization (issue 11).
+``ssm_localization bench track``: tracking with odometry, kidnaps and relocalization.
 
 Sets (``--sets``): ``intel``, ``aces``, ``fr079``, the shared CARMEN logs. Per set the map is built
 from the even-numbered scans (cached in ``--work``, as ``bench localize`` does) and two sequences
@@ -12,7 +12,7 @@ are tracked from scratch (``io/sequences.py``):
 Prints per sequence: counts, per-scan success (``ok`` within 0.5 m / 5 deg) and precision, the
 scans to the first fix and to the recovery after each kidnap (the first right ``ok``, the kidnap
 scan counted as 1), the wrong ``ok`` answers before a fix or a recovery, latency p50 / p95 (all
-scans, global relocalizations included; and the tracked scans alone), then the issue's targets.
+scans, global relocalizations included; and the tracked scans alone), then the targets.
 ``--random-kidnaps N`` adds N random kidnaps per log (seeded): five scans tracked before, four
 after a jump of at least 1 m anywhere in the log, the same odometry step across it; it counts the
 wrong ``ok`` answers after the kidnap and the scans to recovery (the protocol has only two
@@ -45,7 +45,7 @@ from ..localization.localizer import GlobalLocalizer
 from ..localization.tracker import Tracker
 from ..mapping.index import build_index
 
-#: the issue's targets: success, precision, scans to a fix, latency p50 / p95 (ms)
+#: the targets: success, precision, scans to a fix, latency p50 / p95 (ms)
 TARGET_SUCCESS = 0.97
 TARGET_PRECISION = 0.995
 TARGET_FIX_SCANS = 3
@@ -80,7 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def verdict(ts: TrackSummary) -> str:
-    """Compare a tracked sequence with the issue's targets, one line."""
+    """Compare a tracked sequence with the targets, one line."""
     s = ts.summary
     fixes = [ts.first_fix] + ts.recoveries
     checks = [
