@@ -30,8 +30,9 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -ra
 
+# test/unit without DDS (under a minute); make test runs test/unit and test/integration
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -ra -m "not slow"
+	$(BIN)/python -m pytest -q -ra test/unit -m "not slow and not dds"
 
 bench: bench-scanmatch bench-index bench-localize bench-track
 
