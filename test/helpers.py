@@ -56,7 +56,7 @@ def missing(reason: str) -> None:
 
 
 def shared_data(*parts: str) -> Path:
-    """``../shared/data/<parts>``; see :func:`missing` when it does not exist."""
+    """Return :data:`SHARED_DATA` / parts; see :func:`missing` when it does not exist."""
     path = SHARED_DATA.joinpath(*parts)
     if not path.exists():
         missing(f'shared data not found: {path}')
