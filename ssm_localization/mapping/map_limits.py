@@ -38,8 +38,10 @@ def check_map_cells(width: int, height: int, max_cells: int, where: str = 'map')
 
 def check_resolution(resolution: float, where: str = 'map') -> float:
     """
-    Return ``resolution`` as a float; ``ValueError`` naming ``where`` unless it lies in
-    [:data:`MIN_RESOLUTION`, :data:`MAX_RESOLUTION`] metres per cell.
+    Return ``resolution`` as a float, checked.
+
+    ``ValueError`` naming ``where`` unless it lies in [:data:`MIN_RESOLUTION`,
+    :data:`MAX_RESOLUTION`] metres per cell.
     """
     res = float(resolution)
     if not MIN_RESOLUTION <= res <= MAX_RESOLUTION:

@@ -11,7 +11,7 @@ import math
 from types import SimpleNamespace
 import warnings
 
-from conftest import find_bag
+from helpers import find_bag
 import numpy as np
 import pytest
 from ssm_localization import (build_index, GlobalLocalizer, occupancy_map_from_msg,
@@ -158,7 +158,7 @@ def test_absurd_finite_ranges_are_dropped_and_the_rest_of_the_scan_localizes():
 
 @pytest.fixture(scope='module')
 def other_index(tmp_path_factory):
-    """An index of another map than the one in the depot bag (its mirror image)."""
+    """Return an index of another map than the one in the depot bag (its mirror image)."""
     bag = read_bag(find_bag('depot_sim'))
     mirrored = OccupancyMap(bag.map.data[:, ::-1].copy(), bag.map.resolution, bag.map.origin)
     path = tmp_path_factory.mktemp('idx') / 'other.npz'
@@ -181,7 +181,7 @@ def test_replay_with_allow_map_mismatch_warns_and_runs(other_index, tmp_path, ca
                str(out), '--limit', '2', '--quiet', '--allow-map-mismatch'])
     printed = capsys.readouterr().out
     assert rc == 0 and out.is_file()
-    assert "warning: --index" in printed and "another map than the bag's /map" in printed
+    assert 'warning: --index' in printed and "another map than the bag's /map" in printed
 
 
 def test_replay_accepts_an_index_of_the_bags_own_map(tmp_path, capsys):
