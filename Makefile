@@ -6,6 +6,10 @@ STAMP  := $(VENV)/.installed-stamp
 OUT    := out
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MPLBACKEND ?= Agg
+# one BLAS thread unless set (as the console scripts do; see ssm_localization/threads.py)
+export OPENBLAS_NUM_THREADS ?= 1
+export OMP_NUM_THREADS ?= 1
+export MKL_NUM_THREADS ?= 1
 
 .PHONY: venv demo test test-fast params-yaml bench bench-scanmatch bench-index bench-localize bench-track colcon-check clean
 
@@ -26,8 +30,9 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -ra
 
+# test/unit without DDS (under a minute); make test runs test/unit and test/integration
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -ra -m "not slow"
+	$(BIN)/python -m pytest -q -ra test/unit -m "not slow and not dds"
 
 bench: bench-scanmatch bench-index bench-localize bench-track
 

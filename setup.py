@@ -27,9 +27,10 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'ssm_localization = ssm_localization.cli:main',
-            'map_indexer = ssm_localization.ros.map_indexer:main',
-            'global_localizer = ssm_localization.ros.global_localizer:main',
+            # through entry_points.py: one BLAS thread is set before numpy loads
+            'ssm_localization = ssm_localization.entry_points:ssm_localization',
+            'map_indexer = ssm_localization.entry_points:map_indexer',
+            'global_localizer = ssm_localization.entry_points:global_localizer',
         ],
     },
 )

@@ -2,7 +2,10 @@
 ssm_localization: single-scan global localization with spectral scan matching (Park & Park).
 
 The public Python API is re-exported here; import it from ``ssm_localization`` (the module paths
-below it may change). Layers, each importing only the ones before it:
+below it may change). Each name is imported on first use (PEP 562), so ``import
+ssm_localization`` loads nothing heavy and the localization core needs only numpy and scipy:
+PyYAML, Pillow, tqdm, rosbags and matplotlib are loaded by the names that read files, draw
+progress bars, read bags or plot. Layers, each importing only the ones before it:
 
 - ``config``: settings dataclasses and YAML params files;
 - ``matching``: spectral scan matching (paper section II), ``match_scans``;
@@ -13,44 +16,55 @@ below it may change). Layers, each importing only the ones before it:
 - ``evaluation``: offline replay against ground truth, figures;
 - ``cli``, ``bench``, ``ros``: the command line, benchmarks and ROS 2 nodes.
 """
+from __future__ import annotations
+
+import importlib
+
 __version__ = '0.1.0'
 
-from . import threads  # noqa: F401,I100 - first: sets the BLAS threads before numpy loads
-from .config import (IndexConfig, load_configs, load_index_config, load_tracker_config,
-                     LocalizerConfig, MapBuildConfig, MatcherConfig, SimulationConfig,
-                     TopologyConfig, TrackerConfig)
-from .evaluation.replay import replay_scans, ResultRow, summarize, write_results_csv
-from .evaluation.tracking import summarize_track, track_scans, TrackRow
-from .io.bag_reader import iter_scans, read_bag
-from .io.bag_records import BagData, BagError, ScanRecord
-from .io.bag_writer import write_bag
-from .io.carmen import convert_carmen, read_carmen_log
-from .io.simulate import simulate, simulate_bag
-from .localization.localizer import GlobalLocalizer, Localization
-from .localization.tracker import Tracker, TrackResult
-from .mapping.index import build_index, load_index, MapIndex, save_index
-from .mapping.map_io import load_map_yaml, occupancy_map_from_msg, OccupancyMap, save_map_yaml
-from .mapping.topology import NodeKind
-from .matching.features import prepare_scan, ScanFeatures
-from .matching.matcher import match_features, match_scans, MatchResult
-
-__all__ = [
-    '__version__',
+#: public name -> the module (below this package) it comes from
+_EXPORTS = {
     # settings
-    'IndexConfig', 'LocalizerConfig', 'MapBuildConfig', 'MatcherConfig', 'SimulationConfig',
-    'TopologyConfig', 'TrackerConfig', 'load_configs', 'load_index_config',
-    'load_tracker_config',
+    'IndexConfig': 'config', 'LocalizerConfig': 'config', 'MapBuildConfig': 'config',
+    'MatcherConfig': 'config', 'SimulationConfig': 'config', 'TopologyConfig': 'config',
+    'TrackerConfig': 'config', 'load_configs': 'config.params',
+    'load_index_config': 'config.params', 'load_tracker_config': 'config.params',
     # scan matching
-    'MatchResult', 'ScanFeatures', 'match_features', 'match_scans', 'prepare_scan',
+    'MatchResult': 'matching.matcher', 'match_features': 'matching.matcher',
+    'match_scans': 'matching.matcher', 'ScanFeatures': 'matching.features',
+    'prepare_scan': 'matching.features',
     # maps and the index
-    'MapIndex', 'NodeKind', 'OccupancyMap', 'build_index', 'load_index', 'load_map_yaml',
-    'occupancy_map_from_msg', 'save_index', 'save_map_yaml',
+    'MapIndex': 'mapping.index', 'build_index': 'mapping.index', 'load_index': 'mapping.index',
+    'save_index': 'mapping.index', 'NodeKind': 'mapping.topology',
+    'OccupancyMap': 'mapping.occupancy', 'occupancy_map_from_msg': 'mapping.occupancy',
+    'load_map_yaml': 'mapping.map_io', 'save_map_yaml': 'mapping.map_io',
     # localization
-    'GlobalLocalizer', 'Localization', 'TrackResult', 'Tracker',
+    'GlobalLocalizer': 'localization.localizer', 'Localization': 'localization.localizer',
+    'Tracker': 'localization.tracker', 'TrackResult': 'localization.tracker',
     # data
-    'BagData', 'BagError', 'ScanRecord', 'convert_carmen', 'iter_scans', 'read_bag',
-    'read_carmen_log', 'simulate', 'simulate_bag', 'write_bag',
+    'BagData': 'io.bag_records', 'BagError': 'io.bag_records', 'ScanRecord': 'io.bag_records',
+    'iter_scans': 'io.bag_reader', 'read_bag': 'io.bag_reader', 'write_bag': 'io.bag_writer',
+    'convert_carmen': 'io.carmen', 'read_carmen_log': 'io.carmen',
+    'simulate': 'io.simulate', 'simulate_bag': 'io.simulate',
     # evaluation
-    'ResultRow', 'TrackRow', 'replay_scans', 'summarize', 'summarize_track', 'track_scans',
-    'write_results_csv',
-]
+    'ResultRow': 'evaluation.replay', 'replay_scans': 'evaluation.replay',
+    'summarize': 'evaluation.replay', 'write_results_csv': 'evaluation.replay',
+    'TrackRow': 'evaluation.tracking', 'summarize_track': 'evaluation.tracking',
+    'track_scans': 'evaluation.tracking',
+}
+
+__all__ = ['__version__', *sorted(_EXPORTS)]
+
+
+def __getattr__(name: str):
+    """Import a public name on first use (PEP 562: called only for names not found here)."""
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    value = getattr(importlib.import_module(f'{__name__}.{module}'), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

@@ -6,8 +6,11 @@
    success, precision, errors and latency against /ground_truth, writes DIR/intel_results.csv
    and DIR/intel_replay.png (the same as ``ssm_localization replay``).
 2. Spectral scan matching of a real Intel scan pair moved by a random +-400 mm / +-30 deg
-   offset (needs the shared CARMEN log): prints estimate, truth, error and time, writes
+   offset (needs the Intel CARMEN log of the shared data, ``--data DIR`` or
+   ``SSM_LOCALIZATION_DATA``): prints estimate, truth, error and time, writes
    DIR/scan_match.png.
+
+Run it from the root of a source checkout (``bags/`` is found from the current directory).
 """
 from __future__ import annotations
 
@@ -18,15 +21,15 @@ import time
 
 import numpy as np
 
+from .bench.data import DATA_ENV, DATA_HELP, default_data_dir
 from .cli import main as cli_main
 from .evaluation.plotting import plot_match
 from .io.carmen import read_carmen_log
 from .matching.matcher import match_scans
 from .transforms import apply, compose, inverse, wrap_angle
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_DATA = REPO.parent / 'shared' / 'data'
-DEFAULT_BAG = REPO / 'bags' / 'intel_queries'
+#: the committed Intel bag of a source checkout, relative to the current directory
+DEFAULT_BAG = Path('bags') / 'intel_queries'
 
 
 def replay_demo(bag: Path, out: Path) -> int:
@@ -39,18 +42,23 @@ def replay_demo(bag: Path, out: Path) -> int:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--out', type=Path, default=Path('out'))
-    ap.add_argument('--data', type=Path, default=DEFAULT_DATA)
+    ap.add_argument('--data', type=Path, default=None, help=DATA_HELP)
     ap.add_argument('--k', type=int, default=300, help='reference scan of the Intel log')
     ap.add_argument('--seed', type=int, default=1)
-    ap.add_argument('--bag', type=Path, default=DEFAULT_BAG)
+    ap.add_argument('--bag', type=Path, default=DEFAULT_BAG,
+                    help='bag to localize (default: bags/intel_queries)')
     args = ap.parse_args(argv)
+    if not args.bag.exists():
+        ap.error(f'bag not found: {args.bag} (run from the root of a source checkout, or '
+                 'pass --bag)')
     args.out.mkdir(parents=True, exist_ok=True)
     status = replay_demo(args.bag, args.out)
     print()
 
-    path = args.data / 'carmen' / 'intel-corrected.log.gz'
+    path = (args.data or default_data_dir()) / 'carmen' / 'intel-corrected.log.gz'
     if not path.is_file():
-        print(f'scan matching demo skipped: CARMEN log not found: {path} (use --data)')
+        print(f'scan matching demo skipped: CARMEN log not found: {path} (pass --data DIR or '
+              f'set {DATA_ENV})')
         return status
     log = read_carmen_log(path)
     k = args.k

@@ -2,13 +2,12 @@
 Progress of long jobs (indexing a big map, building a map from a log, writing a bag).
 
 The ROS-free core takes a ``progress(done, total, label)`` callback (:data:`ProgressCallback`);
-the command line draws it with tqdm through :class:`TqdmProgress`.
+the command line draws it with tqdm through :class:`TqdmProgress` (tqdm is imported when the
+first bar is drawn: the core does not need it).
 """
 from __future__ import annotations
 
-from typing import Callable
-
-from tqdm import tqdm
+from typing import Any, Callable
 
 # progress(done, total, label): the callback type the ROS-free core accepts for long jobs.
 ProgressCallback = Callable[[int, int, str], None]
@@ -26,10 +25,11 @@ class TqdmProgress:
     def __init__(self, label: str = '', enabled: bool = True):
         self._label = label
         self._enabled = enabled
-        self._bar: tqdm | None = None
+        self._bar: Any = None      # the tqdm bar, made at the first report
 
     def __call__(self, done: int, total: int, label: str = '') -> None:
         if self._bar is None:
+            from tqdm import tqdm
             self._bar = tqdm(desc=self._label, disable=not self._enabled, leave=True,
                              dynamic_ncols=True)
         bar = self._bar

@@ -1,47 +1,44 @@
 """
-Shared pytest setup.
+Shared pytest setup: process environment, collection, markers, fixtures.
 
-ROS isolation: every test run gets its own ``ROS_DOMAIN_ID`` (from the pid) and localhost-only
-discovery, set here before any test calls ``rclpy.init``, so parallel runs (and a robot on the
-network) never see each other. Set ``SSM_TEST_ROS_DOMAIN_ID`` to force a domain.
-ROS helpers (:class:`RosHarness`, the ``ros`` fixture) live here for the ``test_ros_*`` modules.
-Shared data (``../shared/data``) and the committed bags: :func:`shared_data` / :func:`find_bag`
-skip a test when they are missing, except under CI (``CI=true``), where that is an error.
+Plain helpers (paths, the ROS harness, synthetic maps and scans) are in ``helpers.py``.
+
+- The test process gets what the console scripts set (one BLAS thread, before numpy loads) and
+  its own ROS isolation: every run gets its own ``ROS_DOMAIN_ID`` (random) and localhost-only
+  discovery, set here before any test calls ``rclpy.init``, so parallel runs (and a robot on the
+  network) never see each other. Set ``SSM_TEST_ROS_DOMAIN_ID`` to force a domain.
+- ``unit/``: fast tests of one module or function; ``integration/``: end-to-end runs (console
+  scripts in subprocesses, whole bags, both nodes over DDS, ``colcon build``). Tests in
+  ``integration/`` are marked ``integration``, tests that use a ROS domain (DDS) ``dds``;
+  ``make test-fast`` runs ``unit/`` without ``slow`` and ``dds``.
+- Without rclpy the ``test_ros_*`` modules are left out (said in the report header); under CI
+  (``CI=true``) they are collected anyway and fail on import, as a missing install must.
 """
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 import random
-import sys
-import threading
 import time
-from typing import Any, Callable
 
-import pytest
+from ssm_localization.threads import limit_blas_threads
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / 'shared' / 'data'
-BAGS = REPO / 'bags'
-
-_RNG = random.Random(os.getpid() ^ time.time_ns())
-os.environ['ROS_DOMAIN_ID'] = os.environ.get('SSM_TEST_ROS_DOMAIN_ID', str(_RNG.randint(1, 101)))
+limit_blas_threads()      # first: before numpy loads (rclpy and the helpers import it)
+os.environ['ROS_DOMAIN_ID'] = os.environ.get(
+    'SSM_TEST_ROS_DOMAIN_ID', str(random.Random(os.getpid() ^ time.time_ns()).randint(1, 101)))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
-try:   # the ROS tests need rclpy; without it their modules cannot even be imported
-    import rclpy
-    HAVE_RCLPY = True
-except ImportError:
-    HAVE_RCLPY = False
-CI = os.environ.get('CI', '').strip().lower() == 'true'
+from helpers import (_RNG, CI, fresh_domain, HAVE_RCLPY,  # noqa: E402,I100 - after the env
+                     RCLPY_SKIP_REASON, RosHarness)
+import pytest  # noqa: E402
 
-RCLPY_SKIP_REASON = ('rclpy is not importable: the ROS 2 tests need ROS 2 Jazzy Python packages '
-                     '(`make venv` installs them from PyPI, or source /opt/ros/jazzy/setup.bash)')
-# Without rclpy the test_ros_* modules are left out (said in the report header); under CI they
-# are collected anyway and fail on import, as a missing install must.
-collect_ignore_glob = [] if HAVE_RCLPY or CI else ['test_ros_*.py']
+if HAVE_RCLPY:
+    import rclpy
+
+HERE = Path(__file__).resolve().parent
+collect_ignore_glob = [] if HAVE_RCLPY or CI else ['unit/test_ros_*.py',
+                                                   'integration/test_ros_*.py']
 
 
 def pytest_report_header(config) -> str | None:
@@ -49,102 +46,14 @@ def pytest_report_header(config) -> str | None:
     return None if HAVE_RCLPY else f'{RCLPY_SKIP_REASON}: test_ros_*.py not collected'
 
 
-def venv_bin(name: str) -> Path:
-    """Return a console script next to the running interpreter (the venv's bin/)."""
-    return Path(sys.executable).parent / name
-
-
-def missing(reason: str) -> None:
-    """Skip the running test for missing data, or fail it under CI (``CI=true``)."""
-    if os.environ.get('CI', '').strip().lower() == 'true':
-        pytest.fail(f'{reason} (CI=true: the test data must be present)', pytrace=False)
-    pytest.skip(reason)
-
-
-def shared_data(*parts: str) -> Path:
-    """``../shared/data/<parts>``; see :func:`missing` when it does not exist."""
-    path = SHARED_DATA.joinpath(*parts)
-    if not path.exists():
-        missing(f'shared data not found: {path}')
-    return path
-
-
-def find_bag(name: str) -> Path:
-    """bags/<name> (directory or .mcap); see :func:`missing` when it does not exist."""
-    for cand in (BAGS / name, BAGS / f'{name}.mcap'):
-        if cand.exists():
-            return cand
-    missing(f'bag {BAGS / name} is not in the repository')
-
-
-class RosHarness:
-    """An rclpy context with a background MultiThreadedExecutor and a helper node."""
-
-    def __init__(self, args: list[str] | None = None, num_threads: int = 6) -> None:
-        from rclpy.executors import MultiThreadedExecutor
-        self.rclpy = rclpy
-        self.context = rclpy.Context()
-        rclpy.init(args=args, context=self.context)
-        self.executor = MultiThreadedExecutor(num_threads=num_threads, context=self.context)
-        self.node = rclpy.create_node(f'ssm_test_{os.getpid()}', context=self.context)
-        self.executor.add_node(self.node)
-        self._nodes = [self.node]
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        from rclpy.executors import ExternalShutdownException
-        try:
-            self.executor.spin()
-        except (ExternalShutdownException, Exception):  # noqa: BLE001 - shutdown races
-            pass
-
-    def add(self, node):
-        """Spin ``node`` (created with ``context=harness.context``) too; return it."""
-        self.executor.add_node(node)
-        self._nodes.append(node)
-        return node
-
-    def remove(self, node) -> None:
-        self.executor.remove_node(node)
-        self._nodes.remove(node)
-        node.destroy_node()
-
-    def collect(self, msg_type, topic: str, qos) -> list:
-        """Subscribe and append every message to the returned list."""
-        got: list = []
-        self.node.create_subscription(msg_type, topic, got.append, qos)
-        return got
-
-    @staticmethod
-    def wait_for(pred: Callable[[], Any], timeout: float, period: float = 0.02) -> Any:
-        end = time.monotonic() + timeout
-        while True:
-            value = pred()
-            if value or time.monotonic() > end:
-                return value
-            time.sleep(period)
-
-    def call(self, client, request, timeout: float = 30.0):
-        """Call a service (waits for it first); the response, or None on timeout."""
-        if not client.wait_for_service(timeout_sec=min(timeout, 10.0)):
-            return None
-        future = client.call_async(request)
-        end = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < end:
-            time.sleep(0.02)
-        return future.result() if future.done() else None
-
-    def close(self) -> None:
-        for node in list(self._nodes):
-            try:
-                self.executor.remove_node(node)
-                node.destroy_node()
-            except Exception:  # noqa: BLE001
-                pass
-        self.executor.shutdown(timeout_sec=2.0)
-        self.rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=5.0)
+def pytest_collection_modifyitems(config, items) -> None:
+    """Mark the tests of ``integration/`` ``integration`` and those that use DDS ``dds``."""
+    integration = HERE / 'integration'
+    for item in items:
+        if integration in item.path.parents:
+            item.add_marker(pytest.mark.integration)
+        if 'ros_domain' in item.fixturenames:
+            item.add_marker(pytest.mark.dds)
 
 
 def _domain_is_quiet(domain: int, wait: float = 0.7) -> bool:
@@ -182,23 +91,6 @@ def ros_domain() -> int:
     return domain
 
 
-def fresh_domain() -> int:
-    """
-    Move this process (and the processes it starts from now on) to a ROS domain of its own.
-
-    Each ROS test gets one, so a node of an earlier test that is still shutting down (a process
-    of the end-to-end tests, a node with the same name) cannot answer for the node under test.
-    """
-    if 'SSM_TEST_ROS_DOMAIN_ID' in os.environ:
-        return int(os.environ['SSM_TEST_ROS_DOMAIN_ID'])
-    current = int(os.environ.get('ROS_DOMAIN_ID', '0'))
-    domain = current
-    while domain == current:
-        domain = _RNG.randint(1, 101)
-    os.environ['ROS_DOMAIN_ID'] = str(domain)
-    return domain
-
-
 def _harness(num_threads: int | None = None):
     fresh_domain()
     harness = RosHarness() if num_threads is None else RosHarness(num_threads=num_threads)
@@ -218,85 +110,3 @@ def ros_node_threads(ros_domain):
     """Return the harness with as many executor threads as the nodes' own main() uses."""
     from ssm_localization.ros.global_localizer import EXECUTOR_THREADS
     yield from _harness(EXECUTOR_THREADS)
-
-
-def ros_params(**kw) -> list:
-    """Return ``rclpy`` parameter overrides from keyword arguments."""
-    from rclpy.parameter import Parameter
-    return [Parameter(k, value=v) for k, v in kw.items()]
-
-
-class LocalizerRig:
-    """A GlobalLocalizerNode with ``map`` and ``scan`` publishers, a client, ``global_pose``."""
-
-    def __init__(self, ros, **params) -> None:
-        from geometry_msgs.msg import PoseWithCovarianceStamped
-        from nav_msgs.msg import OccupancyGrid
-        from rclpy.qos import qos_profile_sensor_data
-        from sensor_msgs.msg import LaserScan
-        from ssm_localization.ros.global_localizer import GlobalLocalizerNode
-        from ssm_localization.ros.qos import LATCHED_QOS
-        from std_srvs.srv import Trigger
-        params.setdefault('scan_timeout', 3.0)
-        self.ros = ros
-        self.node = ros.add(GlobalLocalizerNode(context=ros.context,
-                                                parameter_overrides=ros_params(**params)))
-        self.map_pub = ros.node.create_publisher(OccupancyGrid, 'map', LATCHED_QOS)
-        self.scan_pub = ros.node.create_publisher(LaserScan, 'scan', qos_profile_sensor_data)
-        self.client = ros.node.create_client(Trigger, 'relocalize')
-        self.poses = ros.collect(PoseWithCovarianceStamped, 'global_pose', LATCHED_QOS)
-        self.n_poses_before = 0
-
-    def wait_ready(self, timeout: float = 120.0) -> bool:
-        """Wait until the node serves an index of the newest map."""
-        return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout,
-                                      0.05))
-
-    def call(self, client, request, scan=None, timeout: float = 30.0):
-        """Call a service; publish ``scan`` every 50 ms until the answer arrives."""
-        assert client.wait_for_service(timeout_sec=10.0)
-        future = client.call_async(request)
-        end = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < end:
-            if scan is not None:
-                self.scan_pub.publish(scan)
-            time.sleep(0.05)
-        assert future.done(), f'{client.srv_name} did not answer'
-        return future.result()
-
-    def call_relocalize(self, scan=None, timeout: float = 30.0):
-        """Call relocalize (Trigger); publish ``scan`` every 50 ms until the answer arrives."""
-        from std_srvs.srv import Trigger
-        self.n_poses_before = len(self.poses)
-        return self.call(self.client, Trigger.Request(), scan, timeout)
-
-
-def close_pose(pose, truth, pos_tol: float = 0.15, yaw_tol: float = 0.05) -> bool:
-    """Tell whether ``pose`` is within ``pos_tol`` metres and ``yaw_tol`` rad of ``truth``."""
-    from ssm_localization.transforms import wrap_angle
-    return (math.hypot(pose[0] - truth[0], pose[1] - truth[1]) < pos_tol
-            and abs(float(wrap_angle(pose[2] - truth[2]))) < yaw_tol)
-
-
-def synthetic_map(variant: int = 0):
-    """
-    Return a small 3-room map (10 m x 7 m at 0.05 m, frame ``map``).
-
-    ``variant`` adds furniture.
-    """
-    import numpy as np
-    from ssm_localization import OccupancyMap
-    res = 0.05
-    data = np.zeros((140, 200), np.int8)
-
-    def box(x0: float, y0: float, x1: float, y1: float) -> None:
-        r0, r1, c0, c1 = (int(round(v / res)) for v in (y0, y1, x0, x1))
-        data[r0:r1, c0:c1] = 100
-    box(0, 0, 10, 0.1), box(0, 6.9, 10, 7), box(0, 0, 0.1, 7), box(9.9, 0, 10, 7)
-    box(4.0, 0, 4.1, 3.0), box(4.0, 4.0, 4.1, 7)          # wall with a door at y 3..4
-    box(7.0, 0, 7.1, 1.0), box(7.0, 2.0, 7.1, 7)          # wall with a door at y 1..2
-    box(1.2, 4.6, 1.8, 5.0), box(8.3, 5.0, 8.7, 5.8), box(5.4, 0.8, 5.7, 1.1)
-    box(2.5, 1.0, 2.8, 2.2), box(5.0, 5.5, 6.2, 5.8)
-    for k in range(variant):
-        box(1.0 + 0.8 * k, 3.0, 1.3 + 0.8 * k, 3.3)
-    return OccupancyMap(data, res, (-1.0, -0.5, 0.0), 'map')

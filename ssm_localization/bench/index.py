@@ -23,11 +23,11 @@ import time
 
 import numpy as np
 
+from .data import data_dir, DATA_HELP
 from ..io.carmen import build_map, read_carmen_log
 from ..mapping.index import build_index
 from ..mapping.map_io import load_map_yaml, OccupancyMap, save_map_yaml
 
-SHARED = Path(__file__).resolve().parents[3] / 'shared' / 'data'
 TARGETS = {'depot': (1.0, None), 'turtlebot3_world': (1.0, None), 'office': (10.0, 1024.0)}
 
 
@@ -157,17 +157,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='skip the synthetic 2000 x 2000 office map')
     parser.add_argument('--repeat', type=int, default=1,
                         help='runs per map; the fastest is reported (default 1)')
+    parser.add_argument('--data', default=None,
+                        help=DATA_HELP + ' (without it, only --extra maps and the office)')
+
+
+def _shared_data(arg: str | None) -> Path | None:
+    """Return the data directory; None (said on stderr) when the default one is missing."""
+    if arg:
+        return data_dir(arg)
+    try:
+        return data_dir()
+    except FileNotFoundError as exc:
+        print(f'shared maps and CARMEN logs skipped: {exc}', file=sys.stderr)
+        return None
 
 
 def run(args: argparse.Namespace) -> int:
     specs: list[tuple[str, str]] = []
-    maps = SHARED / 'maps'
+    shared = _shared_data(args.data)
     for name in ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room'):
-        if (maps / f'{name}.yaml').is_file():
-            specs.append((name, str(maps / f'{name}.yaml')))
+        if shared and (shared / 'maps' / f'{name}.yaml').is_file():
+            specs.append((name, str(shared / 'maps' / f'{name}.yaml')))
     tmp = tempfile.TemporaryDirectory(prefix='ssm_bench_index_')
-    if not args.no_carmen:  # built here, so the worker's peak is the index build alone
-        for log in sorted((SHARED / 'carmen').glob('*.log.gz')):
+    if shared and not args.no_carmen:  # built here, so the worker's peak is the build alone
+        for log in sorted((shared / 'carmen').glob('*.log.gz')):
             name = log.name.split('-corrected')[0]
             yaml_path = Path(tmp.name) / f'{name}.yaml'
             save_map_yaml(build_map(read_carmen_log(log)), yaml_path)

@@ -20,7 +20,7 @@ precision (right / answered ok), the median position error of the ok answers, th
 coverage (right ok answers whose position error lies inside the reported 2-sigma ellipse), latency
 p50 / p95, and where the misses were lost (:func:`miss_stage`); ``--paper`` adds the plain paper
 pipeline, ``--peer`` the exhaustive correlative search of ``bench/peer.py`` on the same queries,
-with the ratios the issue asks for.
+with the ratio of their p95 latencies.
 """
 from __future__ import annotations
 
@@ -33,8 +33,9 @@ import time
 
 import numpy as np
 
+from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer
-from .places import (answers_on, data_dir, foreign, load_place, place_grid, real_grid, real_map,
+from .places import (answers_on, foreign, load_place, place_grid, real_grid, real_map,
                      REAL_PLACES, SIM_PLACES, sim_queries)
 from ..config.params import load_configs
 from ..evaluation.calibration import format_reliability, reliability
@@ -83,7 +84,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--peer', action='store_true',
                         help='also run the exhaustive correlative search on the same queries')
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--data', default=None, help='shared data dir (default ../shared/data)')
+    parser.add_argument('--data', default=None, help=DATA_HELP)
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
     parser.add_argument('--params', help='params YAML applied to every set')
     parser.add_argument('--plot-dir', help='write one replay plot per set here')

@@ -36,16 +36,6 @@ SIM_PLACES = ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room')
 SAME_PLACE = (frozenset({'tb3_sandbox', 'turtlebot3_world'}),)
 
 
-def data_dir(arg: str | None) -> Path:
-    if arg:
-        return Path(arg)
-    here = Path(__file__).resolve().parents[2]
-    for cand in (here.parent / 'shared' / 'data', Path.cwd().parent / 'shared' / 'data'):
-        if cand.exists():
-            return cand
-    raise FileNotFoundError('shared data not found; pass --data')
-
-
 def sim_queries(grid, n: int, seed: int, extra: dict):
     sim = simulate(grid, SimulationConfig(count=n, seed=seed, **extra))
     truth = {s.stamp: tuple(float(v) for v in p) for s, p in zip(sim.scans, sim.poses)}

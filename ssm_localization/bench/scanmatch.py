@@ -16,6 +16,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .data import data_dir, DATA_ENV, DATA_HELP
 from ..config.matcher import HAND_WEIGHTS, MatcherConfig
 from ..io.carmen import read_carmen_log
 from ..matching.descriptors import candidates
@@ -31,8 +32,7 @@ CORRECT_TOL = 0.1                                   # a pair (i, i') is correct 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--data', type=Path, default=None,
-                        help='shared data dir (default: ../shared/data from the repo root)')
+    parser.add_argument('--data', type=Path, default=None, help=DATA_HELP)
     parser.add_argument('--trials', type=int, default=500, help='Table 2 trials (default 500)')
     parser.add_argument('--fig4-trials', type=int, default=30, help='trials per Fig. 4 point')
     parser.add_argument('--pairs', type=int, default=100, help='real pairs per step s')
@@ -47,12 +47,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='Freiburg 079 scan used for Table 2 / Fig. 4 (default %(default)s)')
     parser.add_argument('--only', nargs='+', default=None,
                         choices=['table2', 'fig4', 'real', 'candidates', 'weights', 'icp'])
-
-
-def _data_dir(args) -> Path:
-    if args.data is not None:
-        return Path(args.data)
-    return Path(__file__).resolve().parents[2].parent / 'shared' / 'data'
 
 
 @dataclass
@@ -184,9 +178,10 @@ T2_HEAD = (f'{"":<24} {"x mu":>7} {"x sd":>6} {"y mu":>7} {"y sd":>6} {"th mu":>
 def run(args: argparse.Namespace) -> int:
     if args.quick:
         args.trials, args.fig4_trials, args.pairs, args.ablation_trials = 60, 8, 30, 30
-    data = _data_dir(args) / 'carmen'
+    data = data_dir(args.data) / 'carmen'
     if not data.is_dir():
-        raise FileNotFoundError(f'data directory not found: {data} (use --data)')
+        raise FileNotFoundError(f'data directory not found: {data} (pass --data DIR or set '
+                                f'{DATA_ENV})')
     only = set(args.only or ['table2', 'fig4', 'real', 'candidates', 'weights', 'icp'])
     cfg = MatcherConfig(seed=args.seed)
     logs = {name: read_carmen_log(data / SCANS[name][0]) for name in args.scans}

@@ -1,7 +1,7 @@
 """
 ``ssm_localization bench soak``.
 
-Memory and pose rate of ``global_localizer`` in continuous mode on a looping bag (issue 13's soak).
+Memory and pose rate of ``global_localizer`` in continuous mode on a looping bag (a soak test).
 The driver lives in ``ros/soak.py``; only this command needs rclpy, so it is imported when the
 command runs.
 """
@@ -13,12 +13,14 @@ from pathlib import Path
 from ..cli.arguments import positive_float
 from ..evaluation.plotting import check_plot_path
 
-DEFAULT_BAG = Path(__file__).resolve().parents[2] / 'bags' / 'intel_queries'
+#: the committed Intel bag of a source checkout, relative to the current directory
+DEFAULT_BAG = Path('bags') / 'intel_queries'
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--bag', type=Path, default=DEFAULT_BAG,
-                        help='bag with /map and /scan (default: the committed Intel bag)')
+                        help='bag with /map and /scan (default: bags/intel_queries, the committed '
+                             'Intel bag of a source checkout)')
     parser.add_argument('--minutes', type=positive_float, default=10.0)
     parser.add_argument('--rate', type=positive_float, default=10.0, help='scans per second')
     parser.add_argument('--sample', type=positive_float, default=5.0,

@@ -1,5 +1,5 @@
 """
-``ssm_localization bench track``: tracking with odometry, kidnaps and relocalization (issue 11).
+``ssm_localization bench track``: tracking with odometry, kidnaps and relocalization.
 
 Sets (``--sets``): ``intel``, ``aces``, ``fr079``, ``csail``, ``fhw``, ``edmonton``, the shared
 CARMEN logs. Per set the map is built from the even-numbered scans (cached in ``--work``, as
@@ -12,7 +12,7 @@ CARMEN logs. Per set the map is built from the even-numbered scans (cached in ``
 Prints per sequence: counts, per-scan success (``ok`` within 0.5 m / 5 deg) and precision, the
 scans to the first fix and to the recovery after each kidnap (the first right ``ok``, the kidnap
 scan counted as 1), the wrong ``ok`` answers before a fix or a recovery, latency p50 / p95 (all
-scans, global relocalizations included; and the tracked scans alone), then the issue's targets.
+scans, global relocalizations included; and the tracked scans alone), then the targets.
 ``--random-kidnaps N`` adds N random kidnaps per log (seeded): five scans tracked before, four
 after a jump of at least 1 m anywhere in the log, the same odometry step across it; it counts the
 wrong ``ok`` answers after the kidnap and the scans to recovery (the protocol has only two
@@ -33,8 +33,9 @@ import time
 import numpy as np
 from tqdm import tqdm
 
+from .data import data_dir, DATA_HELP
 from .localize import REAL_SETS, split_of
-from .places import data_dir, real_map
+from .places import real_map
 from ..config.params import load_all_configs
 from ..evaluation.plotting import plot_track
 from ..evaluation.replay import replay_scans, summarize
@@ -73,7 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--random-kidnaps', type=int, default=0, metavar='N',
                         help='also N random kidnaps per log (wrong ok after them, recovery)')
     parser.add_argument('--seed', type=int, default=1, help='seed of the random kidnaps')
-    parser.add_argument('--data', default=None, help='shared data dir (default ../shared/data)')
+    parser.add_argument('--data', default=None, help=DATA_HELP)
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
     parser.add_argument('--params', help='params YAML applied to every set (index, localizer '
                                          'and tracker sections)')
@@ -81,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def verdict(ts: TrackSummary) -> str:
-    """Compare a tracked sequence with the issue's targets, one line."""
+    """Compare a tracked sequence with the targets, one line."""
     s = ts.summary
     fixes = [ts.first_fix] + ts.recoveries
     checks = [

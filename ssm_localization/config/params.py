@@ -17,12 +17,13 @@ of the wrong shape (a list where a mapping belongs, a string for a number). File
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from pathlib import Path
-import typing
-from typing import Any, NamedTuple, TypeVar
+from typing import NamedTuple, TypeVar
 
+# the conversions without YAML live in convert.py (index files use them); re-exported here
+from .convert import (as_mapping as _mapping, config_from_json, config_to_json,  # noqa: F401
+                      flatten, from_dict, unflatten)
 from .localization import LocalizerConfig
 from .mapping import IndexConfig, TopologyConfig
 from .tracking import TrackerConfig
@@ -47,15 +48,6 @@ def load_yaml_mapping(path: str | Path) -> dict:
     return data
 
 
-def _mapping(value: Any, name: str) -> dict:
-    """``value`` if it is a mapping (``{}`` for None), else ``ValueError`` naming ``name``."""
-    if value is None:
-        return {}
-    if not isinstance(value, dict):
-        raise ValueError(f'{name} must be a mapping, got {echo(value)}')
-    return value
-
-
 def node_section(data: dict, node: str) -> dict:
     """
     Return the parameters for ``node`` from a ROS params file.
@@ -69,106 +61,6 @@ def node_section(data: dict, node: str) -> dict:
     if any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values()):
         return {}
     return data
-
-
-def unflatten(flat: dict[str, Any]) -> dict:
-    """``{'a.b': 1}`` -> ``{'a': {'b': 1}}``."""
-    out: dict = {}
-    for key, value in flat.items():
-        parts = str(key).split('.')
-        cur = out
-        for p in parts[:-1]:
-            cur = cur.setdefault(p, {})
-            if not isinstance(cur, dict):
-                raise ValueError(f'parameter {echo(key)}: {p!r} is also given a value')
-        if isinstance(cur.get(parts[-1]), dict) and not isinstance(value, dict):
-            raise ValueError(f'parameter {echo(key)} is also a group of parameters')
-        cur[parts[-1]] = value
-    return out
-
-
-def flatten(obj: Any, prefix: str = '') -> dict[str, Any]:
-    """Return a dataclass instance as ``{'dotted.name': value}`` (tuples become lists)."""
-    out: dict[str, Any] = {}
-    for f in dataclasses.fields(obj):
-        value = getattr(obj, f.name)
-        name = prefix + f.name
-        if dataclasses.is_dataclass(value):
-            out.update(flatten(value, name + '.'))
-        else:
-            out[name] = list(value) if isinstance(value, tuple) else value
-    return out
-
-
-def from_dict(cls: type[T], data: dict | None, where: str = '') -> T:
-    """Build dataclass ``cls`` from a (nested) mapping, checking keys and coercing simple types."""
-    data = dict(_mapping(data, f'parameters {where.rstrip(".") or cls.__name__}'))
-    hints = typing.get_type_hints(cls)
-    kwargs = {}
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(str(k) for k in set(data) - names)
-    if unknown:
-        raise ValueError(f'unknown parameter {where}{echo(unknown[0])} for {cls.__name__} '
-                         f'(known: {", ".join(sorted(names))})')
-    defaults = cls()
-    for f in dataclasses.fields(cls):
-        if f.name not in data:
-            continue
-        value = data[f.name]
-        current = getattr(defaults, f.name)
-        if dataclasses.is_dataclass(current):
-            if not isinstance(value, dict):
-                raise ValueError(f'parameter {where}{f.name} must be a mapping')
-            kwargs[f.name] = from_dict(type(current), value, f'{where}{f.name}.')
-            continue
-        kwargs[f.name] = _coerce(value, current, hints.get(f.name), f'{where}{f.name}')
-    return dataclasses.replace(defaults, **kwargs)
-
-
-def config_to_json(config: Any) -> str:
-    """
-    Return a config dataclass as JSON of its dotted field names.
-
-    This is how an index file stores the config it was built with.
-    """
-    return json.dumps(flatten(config), sort_keys=True)
-
-
-def config_from_json(cls: type[T], text: str) -> T:
-    """Inverse of :func:`config_to_json`."""
-    return from_dict(cls, unflatten(json.loads(text)))
-
-
-def _coerce(value: Any, default: Any, hint: Any, name: str) -> Any:
-    try:
-        if isinstance(default, bool):
-            if not isinstance(value, bool):
-                raise TypeError
-            return value
-        if isinstance(default, int) and not isinstance(default, bool):
-            if isinstance(value, bool) or float(value) != int(value):
-                raise TypeError
-            return int(value)
-        if isinstance(default, float):
-            if isinstance(value, bool):
-                raise TypeError
-            return float(value)
-        if isinstance(default, tuple):
-            seq = list(value)
-            if len(seq) != len(default):
-                raise TypeError
-            return tuple(type(d)(v) if not isinstance(d, (tuple, list)) else v
-                         for d, v in zip(default, seq))
-        if isinstance(default, str):
-            if not isinstance(value, str):
-                raise TypeError
-            return value
-        if default is None:
-            return value
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f'parameter {name}: expected {type(default).__name__} like '
-                         f'{default!r}, got {echo(value)}') from None
-    return value
 
 
 def laser_pose_of_section(section: dict) -> tuple[float, float, float] | None:

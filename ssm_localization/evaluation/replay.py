@@ -15,7 +15,7 @@ from ..files.writing import atomic_files
 from ..localization.localizer import GlobalLocalizer, Localization
 from ..transforms import Pose2, wrap_angle
 
-#: success: status ok and within these bounds of the ground truth (the issue's definition)
+#: success: status ok and within these bounds of the ground truth
 SUCCESS_XY = 0.5
 SUCCESS_YAW = math.radians(5.0)
 

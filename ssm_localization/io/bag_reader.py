@@ -17,8 +17,8 @@ import numpy as np
 from .bag_records import (BagData, BagError, GT_TOPIC, MAP_TOPIC, ODOM_TOPIC, SCAN_TOPIC,
                           SCAN_TYPE, ScanRecord, typestore)
 from ..files.yaml_input import load_yaml_file
-from ..mapping.map_io import occupancy_map_from_msg
 from ..mapping.map_limits import MAX_MAP_CELLS
+from ..mapping.occupancy import occupancy_map_from_msg
 from ..progress import ProgressCallback
 from ..transforms import Pose2, quaternion_to_yaw
 
@@ -214,7 +214,7 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
     Read a whole bag: the first /map, every scan, the /ground_truth and /odom poses.
 
     ``read_map=False`` skips /map (for a caller with a map of its own). The map's resolution and
-    origin are the shortest decimals of their float32 values (``map_io.canonical``), so it
+    origin are the shortest decimals of their float32 values (``occupancy.canonical``), so it
     checksums like the YAML it was made from.
 
     Raises ``FileNotFoundError`` for a missing path, ``BagError`` (a ``ValueError``) for a bag

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ..mapping.map_io import OccupancyMap
+from ..mapping.occupancy import OccupancyMap
 from ..transforms import Pose2
 
 SCAN_TOPIC = '/scan'

@@ -15,7 +15,7 @@ import numpy as np
 from .bag_records import (GT_TOPIC, GT_TYPE, MAP_TOPIC, MAP_TYPE, ODOM_TOPIC, ODOM_TYPE,
                           SCAN_TOPIC, SCAN_TYPE, ScanRecord, stamp_to_ns, typestore)
 from ..files.writing import atomic_dir
-from ..mapping.map_io import OccupancyMap
+from ..mapping.occupancy import OccupancyMap
 from ..progress import ProgressCallback
 from ..transforms import Pose2, yaw_to_quaternion
 

@@ -1,5 +1,5 @@
 """
-Scan sequences with odometry for tracking benchmarks and bags (issue 11's protocol).
+Scan sequences with odometry for tracking benchmarks and bags (the kidnap protocol).
 
 - the real query sequence of a CARMEN log: its odd-numbered scans in order (1-2 m apart on Intel
   and ACES), the ground truth their corrected poses, the odometry the raw one rebuilt from the

@@ -19,7 +19,7 @@ from scipy.ndimage import distance_transform_edt
 from .bag_records import ScanRecord
 from .bag_writer import write_bag
 from ..config.simulation import SimulationConfig
-from ..mapping.map_io import OccupancyMap
+from ..mapping.occupancy import OccupancyMap
 from ..mapping.raycast import cast_rays
 from ..progress import ProgressCallback
 from ..transforms import compose

@@ -26,7 +26,7 @@ import time
 import numpy as np
 from scipy import ndimage
 
-from ..mapping.map_io import OccupancyMap
+from ..mapping.occupancy import OccupancyMap
 from ..transforms import wrap_angle
 
 #: likelihood values are stored as uint8 (0..255)

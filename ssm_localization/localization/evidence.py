@@ -22,7 +22,7 @@ import numpy as np
 
 from .refine import SurfaceModel
 from .verify import BeamCheck
-from ..mapping.map_io import OccupancyMap
+from ..mapping.occupancy import OccupancyMap
 from ..transforms import apply, Pose2
 
 #: an endpoint within this of the wall surface lies on it, metres

@@ -1,5 +1,5 @@
 """
-Tracking at sensor rate with odometry, with global localization as the fallback (issue 11).
+Tracking at sensor rate with odometry, with global localization as the fallback.
 
 Per scan (``Tracker.track``):
 1. predict: the last pose moved by the odometry increment since the last scan, its covariance

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .map_io import OccupancyMap
 from .map_limits import check_map_cells, MAX_MAP_CELLS
+from .occupancy import OccupancyMap
 from ..config.mapping import MapBuildConfig
 from ..progress import ProgressCallback
 

@@ -17,13 +17,13 @@ import zlib
 
 import numpy as np
 
-from .map_io import OccupancyMap
 from .map_limits import check_map_cells, MapTooLargeError, MAX_MAP_CELLS
+from .occupancy import OccupancyMap
 from .raycast import beam_angles as _beam_angles
 from .raycast import RayCaster
 from .topology import build_topology, count_kinds
+from ..config.convert import config_from_json, config_to_json
 from ..config.mapping import IndexConfig
-from ..config.params import config_from_json, config_to_json
 from ..files.reading import clip, input_file
 from ..files.writing import atomic_files
 from ..matching.features import prepare_scan, ScanFeatures

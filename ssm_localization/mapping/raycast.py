@@ -8,10 +8,55 @@ distance from the sensor to the boundary of the first occupied cell it enters.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
 import math
 
 import numpy as np
 from scipy import ndimage
+
+
+@dataclass
+class _Rays:
+    """
+    The rays of one :meth:`RayCaster.cast` still under way, one array entry per ray.
+
+    Lengths are in cells and along the ray (the parameter ``t``; the unit direction makes it a
+    distance). ``tmx``, ``tmy``, ``tdx``, ``tdy`` are Amanatides & Woo's tMaxX, tMaxY, tDeltaX,
+    tDeltaY.
+    """
+
+    ids: np.ndarray      # index of the ray in the flat (P * B) output
+    flat: np.ndarray     # flat index of the current cell in the padded grid
+    t: np.ndarray        # where the ray entered the current cell
+    t_end: np.ndarray    # where it leaves the grid or reaches max_range
+    tmx: np.ndarray      # where it crosses the next vertical cell boundary
+    tmy: np.ndarray      # ... and the next horizontal one
+    tdx: np.ndarray      # distance between vertical boundaries along the ray
+    tdy: np.ndarray      # ... and between horizontal ones
+    step_x: np.ndarray   # change of ``flat`` crossing a vertical boundary (+-1)
+    step_y: np.ndarray   # ... crossing a horizontal one (+- padded width)
+    px: np.ndarray       # start of the ray (grid frame, cells)
+    py: np.ndarray
+    ux: np.ndarray       # unit direction
+    uy: np.ndarray
+    inv_x: np.ndarray    # 1 / ux, 1 / uy (inf for a ray parallel to an axis)
+    inv_y: np.ndarray
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """Return the arrays in field order."""
+        return tuple(getattr(self, name) for name in _RAY_FIELDS)
+
+    def keep(self, keep: np.ndarray) -> None:
+        """Keep the rays where ``keep`` is True, drop the others (each array replaced in turn)."""
+        for name in _RAY_FIELDS:
+            setattr(self, name, getattr(self, name)[keep])
+
+    def each(self):
+        """Iterate over the rays as tuples of Python numbers, in field order."""
+        return zip(*(a.tolist() for a in self.arrays()))
+
+
+_RAY_FIELDS = tuple(f.name for f in fields(_Rays))
 
 
 class RayCaster:
@@ -95,65 +140,64 @@ class RayCaster:
         ids = np.flatnonzero(valid & (t0 < t1) & (t0 <= t_max))
         if ids.size == 0:
             return out
-        ux, uy, px, py, t, t1 = ux[ids], uy[ids], px[ids], py[ids], t0[ids], t1[ids]
-        inv_x, inv_y = inv_x[ids], inv_y[ids]
-        wp = w + 2
+        ux, uy, px, py, inv_x, inv_y = ux[ids], uy[ids], px[ids], py[ids], inv_x[ids], inv_y[ids]
+        t = t0[ids]
         with np.errstate(divide='ignore', invalid='ignore'):
             tdx = np.where(ux != 0, np.abs(inv_x), np.inf)
             tdy = np.where(uy != 0, np.abs(inv_y), np.inf)
-        dflat_x = np.where(ux > 0, 1, -1)
-        dflat_y = np.where(uy > 0, wp, -wp)
         flat, tmx, tmy = self._locate(px, py, ux, uy, inv_x, inv_y, t, t > 0)
-        code, skip = self._code, self._skip
+        rays = _Rays(ids=ids, flat=flat, t=t, t_end=t1[ids], tmx=tmx, tmy=tmy, tdx=tdx, tdy=tdy,
+                     step_x=np.where(ux > 0, 1, -1), step_y=np.where(uy > 0, w + 2, -(w + 2)),
+                     px=px, py=py, ux=ux, uy=uy, inv_x=inv_x, inv_y=inv_y)
         ranges = out.reshape(-1)
-        while ids.size:
-            if ids.size <= self.tail_rays:
-                self._finish(ranges, ids, flat, t, t1, tmx, tmy, tdx, tdy, dflat_x, dflat_y,
-                             px, py, ux, uy, inv_x, inv_y)
+        code, skip = self._code, self._skip
+        # One DDA step of every ray per pass. (The loop stays in one function: its temporaries
+        # then live until the next pass, which keeps numpy's large allocations reused; split
+        # into methods it ran 10-20 % slower.)
+        while rays.ids.size:
+            if rays.ids.size <= self.tail_rays:
+                self._finish(ranges, rays)
                 break
-            cell = code[flat]
-            over = t > t1
+            # Stop the rays that entered an occupied cell (their range), left the grid or
+            # passed max_range.
+            cell = code[rays.flat]
+            over = rays.t > rays.t_end
             hit = (cell == 1) & ~over
             done = (cell != 0) | over
             if hit.any():
-                ranges[ids[hit]] = t[hit] * res
+                ranges[rays.ids[hit]] = rays.t[hit] * res
             if done.any():
-                keep = ~done
-                if not keep.any():
+                rays.keep(~done)
+                if not rays.ids.size:
                     break
-                ids, flat, t, t1 = ids[keep], flat[keep], t[keep], t1[keep]
-                tmx, tmy, tdx, tdy = tmx[keep], tmy[keep], tdx[keep], tdy[keep]
-                dflat_x, dflat_y = dflat_x[keep], dflat_y[keep]
-                ux, uy, px, py = ux[keep], uy[keep], px[keep], py[keep]
-                inv_x, inv_y = inv_x[keep], inv_y[keep]
-            jump = skip[flat]
+            # Move the others on: far from occupied cells, a safe jump through free space first,
+            # then on to the next cell crossed.
+            jump = skip[rays.flat]
             far = jump >= 2.0
-            if far.any():  # safe jump through free space, then re-enter the exact traversal
-                j = np.flatnonzero(far)
-                tj = np.minimum(t[j] + jump[j], t1[j] + 1.0)
-                t[j] = tj
-                flat[j], tmx[j], tmy[j] = self._locate(px[j], py[j], ux[j], uy[j], inv_x[j],
-                                                       inv_y[j], tj, np.zeros(len(j), bool))
-                near = np.flatnonzero(~far)
-            else:
-                near = None
-            if near is None:
-                xs = tmx < tmy
-                t = np.where(xs, tmx, tmy)
-                flat += np.where(xs, dflat_x, dflat_y)
-                tmx = np.where(xs, tmx + tdx, tmx)
-                tmy = np.where(xs, tmy, tmy + tdy)
-            elif near.size:
-                a, b = tmx[near], tmy[near]
+            if not far.any():
+                xs = rays.tmx < rays.tmy
+                rays.t = np.where(xs, rays.tmx, rays.tmy)
+                rays.flat += np.where(xs, rays.step_x, rays.step_y)
+                rays.tmx = np.where(xs, rays.tmx + rays.tdx, rays.tmx)
+                rays.tmy = np.where(xs, rays.tmy, rays.tmy + rays.tdy)
+                continue
+            j = np.flatnonzero(far)
+            tj = np.minimum(rays.t[j] + jump[j], rays.t_end[j] + 1.0)
+            rays.t[j] = tj
+            rays.flat[j], rays.tmx[j], rays.tmy[j] = self._locate(
+                rays.px[j], rays.py[j], rays.ux[j], rays.uy[j], rays.inv_x[j], rays.inv_y[j], tj,
+                np.zeros(len(j), bool))
+            near = np.flatnonzero(~far)
+            if near.size:
+                a, b = rays.tmx[near], rays.tmy[near]
                 xs = a < b
-                t[near] = np.where(xs, a, b)
-                flat[near] += np.where(xs, dflat_x[near], dflat_y[near])
-                tmx[near] = np.where(xs, a + tdx[near], a)
-                tmy[near] = np.where(xs, b, b + tdy[near])
+                rays.t[near] = np.where(xs, a, b)
+                rays.flat[near] += np.where(xs, rays.step_x[near], rays.step_y[near])
+                rays.tmx[near] = np.where(xs, a + rays.tdx[near], a)
+                rays.tmy[near] = np.where(xs, b, b + rays.tdy[near])
         return out
 
-    def _finish(self, ranges, ids, flat, t, t1, tmx, tmy, tdx, tdy, dflat_x, dflat_y,
-                px, py, ux, uy, inv_x, inv_y) -> None:
+    def _finish(self, ranges: np.ndarray, rays: _Rays) -> None:
         """
         Finish the last few rays one by one in plain Python.
 
@@ -164,11 +208,7 @@ class RayCaster:
         code, skip, res = memoryview(self._code), memoryview(self._skip), self.resolution
         h, w = self.shape
         wp = w + 2
-        rays = zip(ids.tolist(), flat.tolist(), t.tolist(), t1.tolist(), tmx.tolist(),
-                   tmy.tolist(), tdx.tolist(), tdy.tolist(), dflat_x.tolist(), dflat_y.tolist(),
-                   px.tolist(), py.tolist(), ux.tolist(), uy.tolist(), inv_x.tolist(),
-                   inv_y.tolist())
-        for ray, f, ti, t_end, ax, ay, dx, dy, sx, sy, x0, y0, vx, vy, ix, iy in rays:
+        for ray, f, ti, t_end, ax, ay, dx, dy, sx, sy, x0, y0, vx, vy, ix, iy in rays.each():
             while True:
                 cell = code[f]
                 over = ti > t_end

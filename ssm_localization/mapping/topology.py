@@ -40,7 +40,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
-from .map_io import OccupancyMap
+from .occupancy import OccupancyMap
 from ..config.mapping import TopologyConfig
 from ..progress import ProgressCallback
 
@@ -211,113 +211,175 @@ def _to_cells(res: float):
 
 # --------------------------------------------------------------------------- main entry
 
+#: rounds of spur pruning (each round re-thins the skeleton); it is stable long before
+MAX_PRUNE_ROUNDS = 20
+
+
 def build_topology(occ_map: OccupancyMap, config: TopologyConfig | None = None,
                    progress: ProgressCallback | None = None) -> Topology:
     """Brushfire distance, GVD and nodes of ``occ_map`` (see the module docstring)."""
     cfg = config or TopologyConfig()
-    res = occ_map.resolution
-    h, w = occ_map.shape
     report = progress or (lambda done, total, label: None)
     steps = 5
-    report(0, steps, 'brushfire')
-    # 1. Brushfire on the padded grid (outside = obstacle).
-    free = np.zeros((h + 2, w + 2), dtype=bool)
-    free[1:-1, 1:-1] = occ_map.free_mask(cfg.free_thresh)
-    wp = w + 2
-    dist, feat = ndimage.distance_transform_edt(free, return_indices=True)
-    feat = feat.astype(np.int32, copy=False)
     # Every length is compared in cells, as the grid gives it, with the settings converted once
     # and rounded: a resolution that differs in its 8th digit (float32 over the wire, a decimal
     # in a YAML file) gives the same topology instead of flipping a comparison at a boundary.
-    cells = _to_cells(res)
-    min_clear_cells = cells(cfg.min_clearance)
-    traversable = free & (dist >= max(min_clear_cells, 1.0))
+    cells = _to_cells(occ_map.resolution)
+    report(0, steps, 'brushfire')
+    free, dist, feat = _brushfire(occ_map, cfg.free_thresh)
+    traversable = free & (dist >= max(cells(cfg.min_clearance), 1.0))
     report(1, steps, 'gvd')
-    # 2. Ridge of the feature transform: neighbours with far-apart nearest obstacle cells.
-    ridge = np.zeros_like(free)
-    strength = np.zeros(free.shape, dtype=np.float32)  # sep / clearance at ridge cells
+    ridge, strength = _ridge(traversable, dist, feat, cfg.ridge_ratio)
+    del feat
+    _fill_free_holes(ridge, free)
+    width = free.shape[1]
+    mask = ridge.ravel()
+    ring = _ring(width)
+    _thin(mask, ring)
+    report(2, steps, 'prune')
+    dflat = dist.ravel()
+    _prune(mask, ring, width, dflat, strength.ravel(), cells(cfg.min_spur_length), cfg)
+    sk = _analyse(mask, width)
+    report(3, steps, 'nodes')
+    nodes, kinds = _select_nodes(sk, dflat, traversable, width, cells, cfg)
+    report(4, steps, 'edges')
+    edges = _edges(sk, nodes)
+    topology = _topology(occ_map, nodes, kinds, edges, mask, dist)
+    report(steps, steps, 'done')
+    return topology
+
+
+def _brushfire(occ_map: OccupancyMap,
+               free_thresh: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Step 1: the free cells of the padded grid (the outside is an obstacle), their distance.
+
+    Returns ``free`` (H+2, W+2) bool, ``dist`` the distance in cells of every cell to the
+    nearest obstacle cell and ``feat`` (2, H+2, W+2) int32, the row and column of that cell.
+    """
+    h, w = occ_map.shape
+    free = np.zeros((h + 2, w + 2), dtype=bool)
+    free[1:-1, 1:-1] = occ_map.free_mask(free_thresh)
+    dist, feat = ndimage.distance_transform_edt(free, return_indices=True)
+    return free, dist, feat.astype(np.int32, copy=False)
+
+
+def _ridge(traversable: np.ndarray, dist: np.ndarray, feat: np.ndarray,
+           ridge_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Step 2: the ridge of the feature transform, neighbours with far-apart nearest obstacles.
+
+    Returns the ridge (bool, the shape of ``traversable``) and its strength, the separation of
+    the nearest obstacle points over the clearance (float32, 0 off the ridge).
+    """
+    rows, cols = traversable.shape
+    ridge = np.zeros_like(traversable)
+    strength = np.zeros(traversable.shape, dtype=np.float32)
     for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        sp = (slice(0, h + 2 - dr), slice(max(0, -dc), w + 2 - max(0, dc)))
-        sq = (slice(dr, h + 2), slice(max(0, dc), w + 2 + min(0, dc)))
+        sp = (slice(0, rows - dr), slice(max(0, -dc), cols - max(0, dc)))
+        sq = (slice(dr, rows), slice(max(0, dc), cols + min(0, dc)))
         both = traversable[sp] & traversable[sq]
         sep2 = ((feat[0][sp] - feat[0][sq]).astype(np.int64) ** 2
                 + (feat[1][sp] - feat[1][sq]).astype(np.int64) ** 2)
         dmax = np.maximum(dist[sp], dist[sq])
-        on = both & (sep2 > np.maximum(9.0, (cfg.ridge_ratio * dmax) ** 2))
+        on = both & (sep2 > np.maximum(9.0, (ridge_ratio * dmax) ** 2))
         ridge[sp] |= on
         ridge[sq] |= on
         ratio = np.where(on, np.sqrt(sep2, dtype=np.float32) / np.maximum(dmax, 1.0), 0.0)
         np.maximum(strength[sp], ratio, out=strength[sp])
         np.maximum(strength[sq], ratio, out=strength[sq])
-    del feat
-    # A GVD loop always encloses an obstacle: fill the ridge's holes that hold only free cells
-    # (staircase walls make tiny ones), so thinning does not keep them as cycles.
+    return ridge, strength
+
+
+def _fill_free_holes(ridge: np.ndarray, free: np.ndarray) -> None:
+    """
+    Fill, in place, the holes of the ridge that hold only free cells.
+
+    A GVD loop always encloses an obstacle; staircase walls make tiny loops around free cells,
+    which thinning would keep as cycles.
+    """
     holes, n_holes = ndimage.label(~ridge)
     if n_holes > 1:
         keep = np.bincount(holes[~free], minlength=n_holes + 1) > 0
         keep[0] = True
         ridge |= ~keep[holes]
-    del holes
-    mask = ridge.ravel()
-    ring = _ring(wp)
-    _thin(mask, ring)
-    report(2, steps, 'prune')
-    # 3. Spur pruning.
-    dflat = dist.ravel()
-    sflat = strength.ravel()
-    for _ in range(20):
-        sk = _analyse(mask, wp)
+
+
+def _prune(mask: np.ndarray, ring: np.ndarray, w: int, dflat: np.ndarray, sflat: np.ndarray,
+           min_spur: float, cfg: TopologyConfig) -> None:
+    """Step 3: remove spurs and noise from the thinned skeleton ``mask`` in place, until stable."""
+    for _ in range(MAX_PRUNE_ROUNDS):
+        sk = _analyse(mask, w)
         if sk.idx.size == 0:
             break
-        arc_len = np.bincount(sk.arc[sk.arc >= 0], minlength=sk.n_arcs).astype(float)
-        has_end = np.bincount(sk.arc[sk.endpoint & (sk.arc >= 0)], minlength=sk.n_arcs) > 0
-        n_adj = np.bincount(sk.adj[:, 0], minlength=sk.n_arcs)
-        cl_clear = np.zeros(max(sk.n_clusters, 1))
-        if sk.n_clusters:
-            np.maximum.at(cl_clear, sk.cluster[sk.junction], dflat[sk.idx[sk.junction]])
-        min_spur = cells(cfg.min_spur_length)
-        limit = np.full(sk.n_arcs, min_spur)
-        one = np.flatnonzero(n_adj == 1)
-        if one.size:
-            first = np.searchsorted(sk.adj[:, 0], one)
-            limit[one] = np.maximum(min_spur, cfg.spur_factor * cl_clear[sk.adj[first, 1]])
-        # weak arcs (nearest obstacle points subtend < 60 deg) are mostly wall noise
-        on_arc = sk.arc >= 0
-        weak = np.bincount(sk.arc[on_arc], weights=sflat[sk.idx[on_arc]] < 1.0,
-                           minlength=sk.n_arcs) > 0.5 * np.maximum(arc_len, 1)
-        limit = np.where(weak, limit * cfg.weak_spur_factor, limit)
-        limit[weak & (n_adj == 0)] = np.inf  # a free-standing weak arc is wall noise
-        spur = has_end & (n_adj <= 1) & (arc_len < limit)
-        # an isolated junction cluster (all its arcs pruned earlier) is noise too
-        lone = np.zeros(max(sk.n_clusters, 1), dtype=bool)
-        if sk.n_clusters:
-            lone[:sk.n_clusters] = np.bincount(sk.adj[:, 1], minlength=sk.n_clusters) == 0
-            cl_size = np.bincount(sk.cluster[sk.junction], minlength=sk.n_clusters)
-            lone[:sk.n_clusters] &= cl_size < min_spur
-        drop = (spur[np.maximum(sk.arc, 0)] & (sk.arc >= 0)) \
-            | (lone[np.maximum(sk.cluster, 0)] & (sk.cluster >= 0))
-        # whole skeleton components shorter than a spur (tiny loops, specks)
-        _, comp = connected_components(sk.graph, directed=False)
-        small = np.bincount(comp) < min_spur
-        drop |= small[comp]
+        drop = (_spur_pixels(sk, dflat, sflat, min_spur, cfg)
+                | _lone_cluster_pixels(sk, min_spur)
+                | _small_component_pixels(sk, min_spur))
         if not drop.any():
             break
         mask[sk.idx[drop]] = False
         _thin(mask, ring)
-    sk = _analyse(mask, wp)
-    report(3, steps, 'nodes')
-    nodes, kinds = _select_nodes(sk, dflat, traversable, wp, cells, cfg)
-    report(4, steps, 'edges')
-    edges = _edges(sk, nodes)
+
+
+def _spur_pixels(sk: _Skeleton, dflat: np.ndarray, sflat: np.ndarray, min_spur: float,
+                 cfg: TopologyConfig) -> np.ndarray:
+    """
+    Pixels of spurs: arcs with a free end, touching at most one junction, shorter than a limit.
+
+    The limit is ``max(min_spur, spur_factor * clearance of the junction)``, times
+    ``weak_spur_factor`` for weak arcs (nearest obstacle points subtending < 60 deg on most
+    pixels: mostly wall noise); a free-standing weak arc is always a spur.
+    """
+    arc_len = np.bincount(sk.arc[sk.arc >= 0], minlength=sk.n_arcs).astype(float)
+    has_end = np.bincount(sk.arc[sk.endpoint & (sk.arc >= 0)], minlength=sk.n_arcs) > 0
+    n_adj = np.bincount(sk.adj[:, 0], minlength=sk.n_arcs)
+    cl_clear = np.zeros(max(sk.n_clusters, 1))
+    if sk.n_clusters:
+        np.maximum.at(cl_clear, sk.cluster[sk.junction], dflat[sk.idx[sk.junction]])
+    limit = np.full(sk.n_arcs, min_spur)
+    one = np.flatnonzero(n_adj == 1)
+    if one.size:
+        first = np.searchsorted(sk.adj[:, 0], one)
+        limit[one] = np.maximum(min_spur, cfg.spur_factor * cl_clear[sk.adj[first, 1]])
+    on_arc = sk.arc >= 0
+    weak = np.bincount(sk.arc[on_arc], weights=sflat[sk.idx[on_arc]] < 1.0,
+                       minlength=sk.n_arcs) > 0.5 * np.maximum(arc_len, 1)
+    limit = np.where(weak, limit * cfg.weak_spur_factor, limit)
+    limit[weak & (n_adj == 0)] = np.inf
+    spur = has_end & (n_adj <= 1) & (arc_len < limit)
+    return spur[np.maximum(sk.arc, 0)] & (sk.arc >= 0)
+
+
+def _lone_cluster_pixels(sk: _Skeleton, min_spur: float) -> np.ndarray:
+    """Pixels of small junction clusters whose arcs were all pruned earlier (noise)."""
+    lone = np.zeros(max(sk.n_clusters, 1), dtype=bool)
+    if sk.n_clusters:
+        lone[:sk.n_clusters] = np.bincount(sk.adj[:, 1], minlength=sk.n_clusters) == 0
+        cl_size = np.bincount(sk.cluster[sk.junction], minlength=sk.n_clusters)
+        lone[:sk.n_clusters] &= cl_size < min_spur
+    return lone[np.maximum(sk.cluster, 0)] & (sk.cluster >= 0)
+
+
+def _small_component_pixels(sk: _Skeleton, min_spur: float) -> np.ndarray:
+    """Pixels of whole skeleton components shorter than a spur (tiny loops, specks)."""
+    _, comp = connected_components(sk.graph, directed=False)
+    small = np.bincount(comp) < min_spur
+    return small[comp]
+
+
+def _topology(occ_map: OccupancyMap, nodes: np.ndarray, kinds: list[int], edges: np.ndarray,
+              mask: np.ndarray, dist: np.ndarray) -> Topology:
+    """Return the :class:`Topology` of the padded-grid results, in map cells and metres."""
+    h, w = occ_map.shape
+    wp = w + 2
+    res = occ_map.resolution
     rows, cols = nodes // wp - 1, nodes % wp - 1
-    gvd = mask.reshape(h + 2, w + 2)[1:-1, 1:-1].copy()
-    clearance = (dist[1:-1, 1:-1] * res).astype(np.float32)
-    report(steps, steps, 'done')
     return Topology(node_xy=occ_map.cell_to_world(rows, cols).reshape(-1, 2),
                     node_kind=np.asarray(kinds, dtype=np.int8),
                     node_cell=np.column_stack((rows, cols)).astype(np.int64).reshape(-1, 2),
-                    node_clearance=(dflat[nodes] * res).astype(np.float64),
-                    edges=edges, gvd_mask=gvd, clearance=clearance)
+                    node_clearance=(dist.ravel()[nodes] * res).astype(np.float64),
+                    edges=edges, gvd_mask=mask.reshape(h + 2, wp)[1:-1, 1:-1].copy(),
+                    clearance=(dist[1:-1, 1:-1] * res).astype(np.float32))
 
 
 def _merge(cands: np.ndarray, score: np.ndarray, w: int, radius_cells: float) -> np.ndarray:
@@ -348,6 +410,11 @@ def _far_from(cands: np.ndarray, existing: list[int], w: int, radius_cells: floa
 
 def _select_nodes(sk: _Skeleton, dflat: np.ndarray, traversable: np.ndarray, w: int,
                   to_cells, cfg: TopologyConfig) -> tuple[np.ndarray, list[int]]:
+    """
+    Step 4: the nodes (flat padded cells) and their kinds, in the order they are chosen.
+
+    Each kind after the branch nodes fills what the ones before it leave uncovered.
+    """
     nodes: list[int] = []
     kinds: list[int] = []
     rad = to_cells(cfg.merge_radius)
@@ -356,86 +423,123 @@ def _select_nodes(sk: _Skeleton, dflat: np.ndarray, traversable: np.ndarray, w: 
         nodes.extend(int(c) for c in cells)
         kinds.extend([int(kind)] * len(cells))
 
-    # Branch nodes: junction clusters touching >= 3 arcs, at their max-clearance pixel.
     if sk.n_clusters:
-        degree = np.bincount(sk.adj[:, 1], minlength=sk.n_clusters)
-        jpix = np.flatnonzero(sk.junction)
-        order = jpix[np.lexsort((-dflat[sk.idx[jpix]], sk.cluster[jpix]))]
-        cl = sk.cluster[order]
-        best = order[np.r_[True, cl[1:] != cl[:-1]]]  # max clearance pixel per cluster
-        best = best[degree[sk.cluster[best]] >= 3]
-        cells = sk.idx[best]
-        add(_merge(cells, dflat[cells], w, rad), NodeKind.BRANCH)
-    # Dead ends.
+        add(_branch_nodes(sk, dflat, w, rad), NodeKind.BRANCH)
     if cfg.dead_end_nodes and sk.idx.size:
-        cells = sk.idx[sk.endpoint]
-        cells = _far_from(_merge(cells, dflat[cells], w, rad), nodes, w, rad)
-        add(cells, NodeKind.DEAD_END)
-    # Region nodes: GVD components, then traversable regions, without any node.
+        add(_dead_end_nodes(sk, dflat, w, rad, nodes), NodeKind.DEAD_END)
     if cfg.region_nodes:
-        min_cells = to_cells(to_cells(cfg.min_region_area))
         if sk.idx.size:
-            n_comp, comp = connected_components(sk.graph, directed=False)
-            has = np.zeros(n_comp, dtype=bool)
-            pos = np.searchsorted(sk.idx, nodes) if nodes else np.zeros(0, dtype=np.int64)
-            on = pos < len(sk.idx)
-            on[on] &= sk.idx[pos[on]] == np.asarray(nodes, dtype=np.int64)[on]
-            has[comp[pos[on]]] = True
-            d = dflat[sk.idx]
-            order = np.lexsort((-d, comp))
-            first = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]
-            add(sk.idx[first[~has[comp[first]]]], NodeKind.REGION)
-        lab, n_reg = ndimage.label(traversable, structure=np.ones((3, 3), dtype=bool))
-        if n_reg:
-            labf = lab.ravel()
-            area = np.bincount(labf, minlength=n_reg + 1)
-            has = np.zeros(n_reg + 1, dtype=bool)
-            has[labf[np.asarray(nodes, dtype=np.int64)]] = True
-            if sk.idx.size:
-                has[labf[sk.idx]] = True
-            want = np.flatnonzero(~has & (area >= max(min_cells, 1)))
-            want = want[want > 0]
-            if want.size:
-                d2 = dflat.reshape(lab.shape)
-                boxes = ndimage.find_objects(lab)
-                best = []
-                for lbl in want:
-                    sl = boxes[lbl - 1]
-                    sub = np.where(lab[sl] == lbl, d2[sl], -1.0)
-                    r, c = np.unravel_index(int(np.argmax(sub)), sub.shape)
-                    best.append((r + sl[0].start) * w + c + sl[1].start)
-                add(best, NodeKind.REGION)
-    # Arc nodes: farthest-point sampling along the GVD, spacing <= arc_spacing.
+            add(_gvd_component_nodes(sk, dflat, nodes), NodeKind.REGION)
+        min_cells = to_cells(to_cells(cfg.min_region_area))
+        add(_free_region_nodes(sk, dflat, traversable, w, nodes, min_cells), NodeKind.REGION)
     if cfg.arc_spacing > 0 and sk.idx.size:
-        half = to_cells(cfg.arc_spacing) / 2.0
-        pos = np.searchsorted(sk.idx, nodes) if nodes else np.zeros(0, dtype=np.int64)
-        on = pos < len(sk.idx)
-        on[on] &= sk.idx[pos[on]] == np.asarray(nodes, dtype=np.int64)[on]
-        src = np.unique(pos[on])
-        if src.size:
-            geo = dijkstra(sk.graph, directed=True, indices=src, min_only=True)
-        else:
-            geo = np.full(len(sk.idx), np.inf)
-        new = []
-        while True:
-            k = int(np.argmax(geo))
-            if not geo[k] > half:
-                break
-            new.append(k)
-            lim = geo[k] if np.isfinite(geo[k]) else np.inf
-            dk = dijkstra(sk.graph, directed=True, indices=k, limit=lim)
-            np.minimum(geo, dk, out=geo)
-        add(sk.idx[new], NodeKind.ARC)
+        add(_arc_nodes(sk, nodes, to_cells(cfg.arc_spacing) / 2.0), NodeKind.ARC)
     return np.asarray(nodes, dtype=np.int64), kinds
 
 
+def _on_skeleton(sk: _Skeleton, nodes) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Positions of ``nodes`` (flat cells) in ``sk.idx``, and which of them are skeleton pixels.
+
+    ``pos[on]`` are the skeleton indices of the nodes on the skeleton.
+    """
+    cells = np.asarray(nodes, dtype=np.int64)
+    pos = np.searchsorted(sk.idx, cells)
+    on = pos < len(sk.idx)
+    on[on] &= sk.idx[pos[on]] == cells[on]
+    return pos, on
+
+
+def _branch_nodes(sk: _Skeleton, dflat: np.ndarray, w: int, radius: float) -> np.ndarray:
+    """Junction clusters touching three or more arcs, each at its max-clearance pixel, merged."""
+    degree = np.bincount(sk.adj[:, 1], minlength=sk.n_clusters)
+    jpix = np.flatnonzero(sk.junction)
+    order = jpix[np.lexsort((-dflat[sk.idx[jpix]], sk.cluster[jpix]))]
+    cl = sk.cluster[order]
+    best = order[np.r_[True, cl[1:] != cl[:-1]]]  # max clearance pixel per cluster
+    best = best[degree[sk.cluster[best]] >= 3]
+    cells = sk.idx[best]
+    return _merge(cells, dflat[cells], w, radius)
+
+
+def _dead_end_nodes(sk: _Skeleton, dflat: np.ndarray, w: int, radius: float,
+                    nodes: list[int]) -> np.ndarray:
+    """Return the ends of GVD arcs, merged, away from the nodes chosen so far."""
+    cells = sk.idx[sk.endpoint]
+    return _far_from(_merge(cells, dflat[cells], w, radius), nodes, w, radius)
+
+
+def _gvd_component_nodes(sk: _Skeleton, dflat: np.ndarray, nodes: list[int]) -> np.ndarray:
+    """One node at the max-clearance pixel of every GVD component that has no node yet."""
+    n_comp, comp = connected_components(sk.graph, directed=False)
+    has = np.zeros(n_comp, dtype=bool)
+    pos, on = _on_skeleton(sk, nodes)
+    has[comp[pos[on]]] = True
+    d = dflat[sk.idx]
+    order = np.lexsort((-d, comp))
+    first = order[np.r_[True, comp[order][1:] != comp[order][:-1]]]
+    return sk.idx[first[~has[comp[first]]]]
+
+
+def _free_region_nodes(sk: _Skeleton, dflat: np.ndarray, traversable: np.ndarray, w: int,
+                       nodes: list[int], min_cells: float) -> list[int]:
+    """
+    One node at the max-clearance cell of every traversable region without node or GVD.
+
+    Regions smaller than ``min_cells`` cells are left out.
+    """
+    lab, n_reg = ndimage.label(traversable, structure=np.ones((3, 3), dtype=bool))
+    if not n_reg:
+        return []
+    labf = lab.ravel()
+    area = np.bincount(labf, minlength=n_reg + 1)
+    has = np.zeros(n_reg + 1, dtype=bool)
+    has[labf[np.asarray(nodes, dtype=np.int64)]] = True
+    if sk.idx.size:
+        has[labf[sk.idx]] = True
+    want = np.flatnonzero(~has & (area >= max(min_cells, 1)))
+    want = want[want > 0]
+    best = []
+    if want.size:
+        d2 = dflat.reshape(lab.shape)
+        boxes = ndimage.find_objects(lab)
+        for lbl in want:
+            sl = boxes[lbl - 1]
+            sub = np.where(lab[sl] == lbl, d2[sl], -1.0)
+            r, c = np.unravel_index(int(np.argmax(sub)), sub.shape)
+            best.append((r + sl[0].start) * w + c + sl[1].start)
+    return best
+
+
+def _arc_nodes(sk: _Skeleton, nodes: list[int], half_spacing: float) -> np.ndarray:
+    """
+    Nodes along the GVD so that no skeleton pixel is farther than ``half_spacing`` from one.
+
+    Farthest-point sampling by geodesic distance on the skeleton, from the nodes chosen so far.
+    """
+    pos, on = _on_skeleton(sk, nodes)
+    src = np.unique(pos[on])
+    if src.size:
+        geo = dijkstra(sk.graph, directed=True, indices=src, min_only=True)
+    else:
+        geo = np.full(len(sk.idx), np.inf)
+    new = []
+    while True:
+        k = int(np.argmax(geo))
+        if not geo[k] > half_spacing:
+            break
+        new.append(k)
+        lim = geo[k] if np.isfinite(geo[k]) else np.inf
+        dk = dijkstra(sk.graph, directed=True, indices=k, limit=lim)
+        np.minimum(geo, dk, out=geo)
+    return sk.idx[new]
+
+
 def _edges(sk: _Skeleton, nodes: np.ndarray) -> np.ndarray:
-    """Pairs of nodes whose geodesic territories on the GVD touch."""
+    """Step 5: pairs of nodes whose geodesic territories on the GVD touch."""
     if sk.idx.size == 0 or nodes.size < 2:
         return np.zeros((0, 2), dtype=np.int64)
-    pos = np.searchsorted(sk.idx, nodes)
-    on = pos < len(sk.idx)
-    on[on] &= sk.idx[pos[on]] == nodes[on]
+    pos, on = _on_skeleton(sk, nodes)
     if on.sum() < 2:
         return np.zeros((0, 2), dtype=np.int64)
     node_of = np.full(len(sk.idx), -1, dtype=np.int64)

@@ -1,0 +1,272 @@
+"""
+Test `ssm_localization replay` through cli.main.
+
+RESULTS.csv contract, plot, user errors; ``--track`` and ``bench track``.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import re
+
+from helpers import find_bag, shared_data
+import numpy as np
+import pytest
+from ssm_localization import read_bag, save_map_yaml, write_bag
+from ssm_localization.cli import main
+
+REQUIRED = ['stamp', 'x', 'y', 'yaw', 'status', 'latency_ms', 'node', 'score']
+
+
+@pytest.fixture(scope='module')
+def depot_bag():
+    path = find_bag('depot_sim')
+    return path, read_bag(path)
+
+
+def _read_csv(path):
+    with open(path, newline='') as fh:
+        rows = list(csv.reader(fh))
+    return rows[0], [dict(zip(rows[0], r)) for r in rows[1:]]
+
+
+def test_replay_cli_writes_results_and_plot(depot_bag, tmp_path, capsys):
+    path, bag = depot_bag
+    out, png = tmp_path / 'out.csv', tmp_path / 'out.png'
+    rc = main(['replay', str(path), '-o', str(out), '--plot', str(png), '--limit', '5',
+               '--quiet'])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    header, rows = _read_csv(out)
+    assert header[:len(REQUIRED)] == REQUIRED
+    assert len(rows) == 5
+    assert [float(r['stamp']) for r in rows] == pytest.approx([s.stamp for s in bag.scans[:5]])
+    for r in rows:
+        assert r['status'] in ('ok', 'ambiguous', 'failed')
+        assert float(r['latency_ms']) > 0
+        int(r['node'])
+        float(r['score'])
+        if r['status'] == 'ok':
+            truth = bag.ground_truth[float(r['stamp'])]
+            assert math.hypot(float(r['x']) - truth[0], float(r['y']) - truth[1]) < 0.5
+    assert sum(r['status'] == 'ok' for r in rows) >= 4
+    assert png.is_file() and png.stat().st_size > 1000
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert 'success' in captured.out                 # /ground_truth present: figures printed
+
+
+def test_replay_cli_with_map_file_on_a_bag_without_map(depot_bag, tmp_path, capsys):
+    _, bag = depot_bag
+    no_map = tmp_path / 'no_map'
+    write_bag(no_map, map=None, scans=bag.scans[:2],
+              ground_truth={s.stamp: bag.ground_truth[s.stamp] for s in bag.scans[:2]})
+    out = tmp_path / 'out.csv'
+    # no /map and no --map: a clear error, exit code 2, nothing written
+    rc = main(['replay', str(no_map), '-o', str(out), '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert '/map' in err and '--map' in err and 'Traceback' not in err
+    assert not out.exists()
+    # with --map it works
+    map_yaml = tmp_path / 'depot.yaml'
+    save_map_yaml(bag.map, map_yaml)
+    rc = main(['replay', str(no_map), '-o', str(out), '--map', str(map_yaml), '--quiet'])
+    assert rc == 0, capsys.readouterr().err
+    _, rows = _read_csv(out)
+    assert [r['status'] for r in rows] == ['ok', 'ok']
+
+
+def test_replay_cli_bag_without_scans(depot_bag, tmp_path, capsys):
+    _, bag = depot_bag
+    map_only = tmp_path / 'map_only'
+    write_bag(map_only, map=bag.map)
+    rc = main(['replay', str(map_only), '-o', str(tmp_path / 'out.csv'), '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert '/scan' in err and err.startswith('ssm_localization replay: error:')
+
+
+def test_replay_cli_unknown_scan_topic(depot_bag, tmp_path, capsys):
+    path, _ = depot_bag
+    rc = main(['replay', str(path), '-o', str(tmp_path / 'out.csv'), '--scan-topic', '/laser',
+               '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 2 and '/laser' in err
+
+
+def test_replay_cli_missing_bag(tmp_path, capsys):
+    rc = main(['replay', str(tmp_path / 'nowhere'), '-o', str(tmp_path / 'out.csv')])
+    err = capsys.readouterr().err
+    assert rc == 2 and 'nowhere' in err
+
+
+def test_replay_cli_bad_params(depot_bag, tmp_path, capsys):
+    path, _ = depot_bag
+    params = tmp_path / 'p.yaml'
+    params.write_text('localizer: {top_nn: 3}\n')
+    rc = main(['replay', str(path), '-o', str(tmp_path / 'out.csv'), '--params', str(params),
+               '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 2 and 'top_nn' in err
+
+
+def test_replay_cli_params_are_used(depot_bag, tmp_path, capsys):
+    """--params reaches the localizer: min_points above the beam count fails every scan."""
+    path, _ = depot_bag
+    params = tmp_path / 'p.yaml'
+    params.write_text('global_localizer:\n  ros__parameters:\n'
+                      '    localizer: {min_points: 100000}\n')
+    out = tmp_path / 'out.csv'
+    rc = main(['replay', str(path), '-o', str(out), '--params', str(params), '--limit', '2',
+               '--quiet'])
+    assert rc == 0, capsys.readouterr().err
+    _, rows = _read_csv(out)
+    assert [r['status'] for r in rows] == ['failed', 'failed']
+    assert all(r['x'] in ('', 'nan') and r['node'] == '-1' for r in rows)
+
+
+def test_replay_cli_requires_output(depot_bag):
+    path, _ = depot_bag
+    with pytest.raises(SystemExit) as info:
+        main(['replay', str(path)])
+    assert info.value.code == 2
+
+
+def test_replay_cli_index_file(depot_bag, tmp_path, capsys):
+    path, _ = depot_bag
+    index = tmp_path / 'depot.npz'
+    map_yaml = tmp_path / 'depot.yaml'
+    save_map_yaml(depot_bag[1].map, map_yaml)
+    assert main(['index', str(map_yaml), '-o', str(index)]) == 0
+    out = tmp_path / 'out.csv'
+    rc = main(['replay', str(path), '-o', str(out), '--index', str(index), '--limit', '2',
+               '--quiet'])
+    assert rc == 0, capsys.readouterr().err
+    _, rows = _read_csv(out)
+    assert len(rows) == 2 and all(r['status'] == 'ok' for r in rows)
+    assert np.isfinite([float(r['x']) for r in rows]).all()
+
+
+# --------------------------------------------------------------------------- --track
+
+@pytest.fixture(scope='module')
+def intel_track():
+    path = find_bag('intel_track')
+    return path, read_bag(path)
+
+
+def _right(row, bag) -> bool:
+    truth = bag.ground_truth[float(row['stamp'])]
+    return (row['status'] == 'ok'
+            and math.hypot(float(row['x']) - truth[0], float(row['y']) - truth[1]) <= 0.5
+            and abs(math.remainder(float(row['yaw']) - truth[2], 2 * math.pi))
+            <= math.radians(5))
+
+
+def test_replay_track_writes_one_row_per_scan_and_recovers(intel_track, tmp_path, capsys):
+    path, bag = intel_track
+    out = tmp_path / 'track.csv'
+    rc = main(['replay', str(path), '-o', str(out), '--track', '--quiet'])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    header, rows = _read_csv(out)
+    assert header[:len(REQUIRED)] == REQUIRED and 'mode' in header
+    assert len(rows) == len(bag.scans) == 180
+    assert [float(r['stamp']) for r in rows] == pytest.approx([s.stamp for s in bag.scans])
+    assert all(float(r['latency_ms']) > 0 for r in rows)
+    assert {r['mode'] for r in rows} <= {'tracked', 'relocalized', 'lost'}
+    assert sum(r['mode'] == 'tracked' for r in rows) >= 170
+    success = sum(_right(r, bag) for r in rows) / len(rows)
+    assert success >= 0.97
+    wrong = [r['stamp'] for r in rows if r['status'] == 'ok' and not _right(r, bag)]
+    assert len(wrong) <= 1, wrong
+    line = next(ln for ln in captured.out.splitlines() if ln.startswith('track:'))
+    assert 'success' in line and 'precision' in line and 'first fix 1 ' in line, line
+    recoveries = re.search(r'recoveries ([0-9, ]+|-) \|', line).group(1)
+    counts = [int(v) for v in recoveries.split(',')]
+    assert len(counts) >= 2 and max(counts) <= 3, line       # the two kidnaps, at least
+
+
+def test_replay_track_without_odometry(intel_track, tmp_path, capsys):
+    path, bag = intel_track
+    no_odom = tmp_path / 'no_odom'
+    scans = bag.scans[:40]
+    write_bag(no_odom, map=bag.map, scans=scans,
+              ground_truth={s.stamp: bag.ground_truth[s.stamp] for s in scans})
+    out = tmp_path / 'track.csv'
+    rc = main(['replay', str(no_odom), '-o', str(out), '--track', '--quiet'])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert 'tracking without odometry (no /odom in the bag)' in captured.out
+    _, rows = _read_csv(out)
+    assert len(rows) == 40
+    ok = [r for r in rows if r['status'] == 'ok']
+    assert len(ok) >= 36 and sum(_right(r, bag) for r in ok) >= len(ok) - 1
+    rc = main(['replay', str(path), '-o', str(out), '--track', '--no-odom', '--limit', '5',
+               '--quiet'])
+    assert rc == 0 and 'tracking without odometry (--no-odom)' in capsys.readouterr().out
+
+
+def test_replay_track_interpolates_odometry_at_another_rate(intel_track, tmp_path, capsys):
+    """/odom at 5 Hz, offset from the scans: interpolated at the scans' stamps as the node does."""
+    path, bag = intel_track
+    scans = bag.scans[:40]
+    stamps = np.array([s.stamp for s in scans])
+    poses = np.array([bag.odom[s] for s in stamps])
+    times = np.arange(stamps[0] - 0.13, stamps[-1] + 0.2, 0.2)
+    yaw = np.interp(times, stamps, np.unwrap(poses[:, 2]))
+    odom = {float(t): (float(np.interp(t, stamps, poses[:, 0])),
+                       float(np.interp(t, stamps, poses[:, 1])),
+                       float(math.remainder(a, math.tau)))
+            for t, a in zip(times, yaw)
+            if np.abs(stamps - t).min() > 0.005                     # no stamp shared with a scan
+            and not any(abs(t - stamps[k]) < 1.0 for k in (10, 11))}     # none near two scans
+    odd = tmp_path / 'odom_5hz'
+    write_bag(odd, map=bag.map, scans=scans, odom=odom,
+              ground_truth={s.stamp: bag.ground_truth[s.stamp] for s in scans})
+    out = tmp_path / 'track.csv'
+    rc = main(['replay', str(odd), '-o', str(out), '--track', '--quiet'])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert 'tracking without odometry on 2 of 40 scans' in captured.out, captured.out
+    _, rows = _read_csv(out)
+    assert len(rows) == 40 and sum(r['mode'] == 'tracked' for r in rows) >= 36
+    assert sum(_right(r, bag) for r in rows) >= 38
+
+
+def test_replay_track_without_a_map_is_a_clear_error(intel_track, tmp_path, capsys):
+    _, bag = intel_track
+    no_map = tmp_path / 'no_map'
+    write_bag(no_map, map=None, scans=bag.scans[:3])
+    rc = main(['replay', str(no_map), '-o', str(tmp_path / 'o.csv'), '--track', '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 2 and 'no /map message' in err, err
+    assert not (tmp_path / 'o.csv').exists()
+
+
+def test_replay_track_refuses_bad_tracker_params(intel_track, tmp_path, capsys):
+    path, _ = intel_track
+    params = tmp_path / 'p.yaml'
+    params.write_text('tracker:\n  odom_alphas: [0.1, 0.1, -1.0, 0.1]\n')
+    rc = main(['replay', str(path), '-o', str(tmp_path / 'o.csv'), '--track', '--params',
+               str(params), '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 2 and 'odom_alphas' in err, err
+
+
+def test_bench_track_prints_both_sequences_and_the_targets(tmp_path, capsys):
+    data = shared_data()
+    shared_data('carmen', 'aces-corrected.log.gz')
+    rc = main(['bench', 'track', '--sets', 'aces', '--scans', '60', '--data', str(data),
+               '--work', str(tmp_path / 'work'), '--plot-dir', str(tmp_path / 'plots')])
+    out = capsys.readouterr().out
+    assert rc == 0
+    real = next(ln for ln in out.splitlines() if ln.startswith('aces   real'))
+    kidnap = next(ln for ln in out.splitlines() if ln.startswith('aces   kidnap'))
+    assert 'n=60 ' in real and 'n=36 ' in kidnap, out
+    counts = re.search(r'recoveries ([0-9, ]+) \|', kidnap).group(1).split(',')
+    assert len(counts) == 2 and all(1 <= int(c) <= 3 for c in counts), kidnap
+    assert out.count('targets:') == 2
+    assert sorted(p.name for p in (tmp_path / 'plots').iterdir()) == [
+        'track_aces_kidnap.png', 'track_aces_real.png']
+    assert (tmp_path / 'work' / 'aces_even.yaml').is_file()

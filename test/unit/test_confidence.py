@@ -1,0 +1,189 @@
+"""
+The evidence of an answer and its calibrated confidence (localization/evidence.py, confidence.py).
+
+The features on hand-built scans, the beam counts, the fit and the reliability bins, the model
+shipped against the file it was copied from, and the verdicts a right pose, a wrong one and a
+scan of another building must get.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from helpers import BAGS, REPO
+import numpy as np
+import pytest
+from ssm_localization import build_index, GlobalLocalizer, read_bag
+from ssm_localization.config.confidence import CONFIDENCE_MODEL, ConfidenceModel
+from ssm_localization.evaluation.calibration import fit_confidence, reliability
+from ssm_localization.files.yaml_input import load_yaml_file
+from ssm_localization.localization.confidence import feature_values
+from ssm_localization.localization.evidence import Evidence, unexplained_runs
+from ssm_localization.localization.verify import check_beams
+from ssm_localization.mapping.map_io import OccupancyMap
+
+
+# --------------------------------------------------------------------------- features
+
+def _wall(x0: float, x1: float, step: float = 0.05) -> np.ndarray:
+    x = np.arange(x0, x1 + 1e-9, step)
+    return np.column_stack((x, np.full_like(x, 2.0)))
+
+
+def test_unexplained_runs_count_long_stretches_only():
+    pts = _wall(0.0, 10.0)                          # 10 m of wall in sweep order
+    off = np.zeros(len(pts), bool)
+    assert unexplained_runs(pts, off) == (0.0, pytest.approx(10.0))
+    off[(pts[:, 0] > 2.0) & (pts[:, 0] < 2.5)] = True         # a person: 0.4 m, not counted
+    assert unexplained_runs(pts, off)[0] == 0.0
+    off[(pts[:, 0] > 5.0) & (pts[:, 0] < 8.0)] = True         # an unmapped wall: 2.9 m
+    fraction, length = unexplained_runs(pts, off)
+    assert fraction == pytest.approx(2.9 / 10.0, abs=0.01) and length == pytest.approx(10.0)
+
+
+def test_unexplained_runs_do_not_bridge_gaps():
+    """Two unexplained stretches of 0.8 m across a 3 m gap are two short ones, not one long."""
+    pts = np.vstack((_wall(0.0, 0.8), _wall(3.8, 4.6)))
+    fraction, length = unexplained_runs(pts, np.ones(len(pts), bool))
+    assert fraction == 0.0 and length == pytest.approx(1.6)
+
+
+def test_beam_counts():
+    inf = np.inf
+    expected = np.array([2.0, 2.0, 2.0, 2.0, 2.0, inf, inf, 20.0])
+    measured = np.array([2.05, 3.0, 1.0, inf, 2.0, 5.0, inf, inf])
+    c = check_beams(measured, expected, tol=0.15, range_limit=10.0)
+    assert (c.beams, c.returns, c.hits, c.through, c.shorts) == (8, 5, 2, 2, 1)
+    # no return where the map has a wall: 2 m is within 90 % of the 10 m range, 20 m is not
+    assert c.missing == 1
+    assert c.consistent == pytest.approx(3 / 8) and c.contradicting == pytest.approx(2 / 8)
+
+
+def _evidence(**kw) -> Evidence:
+    base = {'hit': 0.95, 'through': 0.02, 'short': 0.03, 'missing': 0.0, 'on_wall': 0.97,
+            'unknown': 0.01, 'unexplained_runs': 0.0, 'explained': 0.9, 'margin': 0.6,
+            'position_std': 0.05, 'yaw_std': 0.01, 'returns': 120, 'scan_length': 25.0,
+            'extent': 8.0}
+    base.update(kw)
+    return Evidence(**base)
+
+
+@pytest.mark.parametrize('change', [
+    {'hit': 0.6, 'through': 0.3}, {'margin': 0.02}, {'unexplained_runs': 0.3},
+    {'explained': 0.6}, {'scan_length': 3.0, 'extent': 1.5, 'returns': 40},
+])
+def test_the_shipped_model_trusts_less_whatever_the_evidence_loses(change):
+    """Every kind of worse evidence lowers the confidence (the weights have the right signs)."""
+    good = CONFIDENCE_MODEL.probability(feature_values(_evidence()))
+    worse = CONFIDENCE_MODEL.probability(feature_values(_evidence(**change)))
+    assert worse < good, change
+
+
+# --------------------------------------------------------------------------- calibration
+
+def test_fit_recovers_a_known_logistic_model_and_its_probabilities_are_calibrated():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(4000, 2))
+    p = 1.0 / (1.0 + np.exp(-(0.5 + 2.0 * x[:, 0] - 1.0 * x[:, 1])))
+    y = rng.random(4000) < p
+    model = fit_confidence([{'a': a, 'b': b} for a, b in x], y, ('a', 'b'), l2=1e-3)
+    w = np.array(model.weights) / np.array(model.scale)
+    assert w == pytest.approx([2.0, -1.0], rel=0.15)
+    probs = [model.probability({'a': a, 'b': b}) for a, b in x]
+    for b in reliability(probs, y):
+        if b.count >= 100:        # within three binomial standard deviations
+            sigma = math.sqrt(b.mean_confidence * (1 - b.mean_confidence) / b.count)
+            assert abs(b.gap) < 3 * sigma + 0.01, b
+
+
+def test_reliability_bins():
+    bins = reliability([0.05, 0.05, 0.95, 0.999, 1.0], [False, True, True, True, True])
+    assert [b.count for b in bins if b.count] == [2, 1, 2]
+    assert bins[0].observed == 0.5 and bins[-1].observed == 1.0 and bins[-1].high == 1.0
+    assert math.isnan(bins[3].observed)
+
+
+def test_model_needs_consistent_fields():
+    with pytest.raises(ValueError, match='2 features'):
+        ConfidenceModel(('a', 'b'), (0.0,), (1.0,), (1.0,), 0.0)
+    with pytest.raises(ValueError, match='scales > 0'):
+        ConfidenceModel(('a',), (0.0,), (0.0,), (1.0,), 0.0)
+    with pytest.raises(ValueError, match='refused'):
+        ConfidenceModel(('a',), (0.0,), (1.0,), (1.0,), 0.0, refused={'rival': 2.0})
+
+
+def test_the_shipped_model_is_the_calibrated_one():
+    """CONFIDENCE_MODEL is config/confidence_model.yaml, written by scripts/learn_confidence.py."""
+    doc = load_yaml_file(REPO / 'config' / 'confidence_model.yaml', 'confidence model')
+    fitted = doc['model']
+    shipped = dataclasses.asdict(CONFIDENCE_MODEL)
+    assert list(fitted['features']) == list(shipped['features'])
+    for key in ('mean', 'scale', 'weights'):
+        assert fitted[key] == pytest.approx(list(shipped[key]), rel=1e-9)
+    assert fitted['intercept'] == pytest.approx(shipped['intercept'], rel=1e-9)
+    assert fitted['refused'] == shipped['refused']
+    assert 'calibration' in fitted['split']
+
+
+# --------------------------------------------------------------------------- verdicts
+
+@pytest.fixture(scope='module')
+def depot():
+    bag = read_bag(BAGS / 'depot_sim')
+    return bag, GlobalLocalizer(build_index(bag.map))
+
+
+def test_a_right_pose_is_ok_with_a_high_confidence(depot):
+    bag, loc = depot
+    for scan in bag.scans[:3]:
+        out = loc.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                                scan.range_min, scan.range_max)
+        truth = bag.ground_truth_of(scan)
+        assert out.status == 'ok', out.message
+        assert math.hypot(out.pose[0] - truth[0], out.pose[1] - truth[1]) < 0.05
+        assert out.confidence >= loc.config.min_confidence
+        assert f'confidence {out.confidence:.3f}' in out.message
+        assert out.evidence.hit > 0.9 and out.evidence.margin > 0.1
+
+
+def test_a_wrong_pose_has_the_evidence_against_it(depot):
+    """The same scan judged 1.5 m and 20 deg off its pose: beams through walls, no trust."""
+    bag, loc = depot
+    scan = bag.scans[0]
+    query = loc.prepare_scan(scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
+                             scan.range_max)
+    right = loc.localize_query(query)
+    best = next(h for h in right.candidates if h.check is not None)
+    x, y, yaw = best.laser_pose
+    wrong = dataclasses.replace(best, laser_pose=(x + 1.5, y, yaw + math.radians(20.0)),
+                                check=None, found_by=set())
+    loc.verify(query, [wrong])
+    ev = loc.evidence(query, wrong, rival=best.score)
+    p = CONFIDENCE_MODEL.probability(feature_values(ev))
+    assert ev.margin < 0 and ev.hit < 0.5 and ev.through > 0.2
+    assert p < 0.5 < right.confidence
+
+
+def _rooms() -> OccupancyMap:
+    """Return a floor of offices unlike the Intel lab: rooms 6 m x 5 m, a table in each."""
+    res = 0.05
+    d = np.zeros((200, 300), np.int8)
+    d[[0, -1], :] = 100
+    d[:, [0, -1]] = 100
+    for r0 in range(0, 200, 100):
+        for c0 in range(0, 300, 120):
+            d[r0:r0 + 100, c0] = 100
+            d[r0 + 100 - 1, c0:c0 + 120] = 100
+            d[r0 + 40:r0 + 60, c0] = 0                                          # door
+            d[r0 + 40:r0 + 50, c0 + 40:c0 + 70] = 100                           # table
+    return OccupancyMap(d, res)
+
+
+def test_a_scan_of_another_building_is_refused_for_lack_of_evidence():
+    loc = GlobalLocalizer(build_index(_rooms()))
+    bag = read_bag(BAGS / 'intel_queries')
+    for scan in bag.scans[:8]:
+        out = loc.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                                scan.range_min, scan.range_max)
+        assert out.status != 'ok', out.message
+        assert out.confidence < loc.config.min_confidence

@@ -1,0 +1,360 @@
+"""
+Static checks of launch/*.launch.py and rviz/ssm_localization.rviz.
+
+``launch``, ``launch_ros``, nav2 and RViz cannot be installed here (no PyPI wheels), so the
+launch files are never executed by these tests. Instead each file is parsed with ``ast`` and
+every name it relies on is checked: imports against the names ROS 2 Jazzy's launch modules
+export, packages / executables / parameters of the nodes it starts against our setup.py and
+params file or against nav2 Jazzy's sources, files it loads against the package, lifecycle
+managers against the nodes they manage. The Jazzy names come from the committed snapshot
+``test/data/ros_jazzy_names.yaml`` (written by ``scripts/snapshot_ros_names.py``; sources and
+commits inside). test_colcon.py checks that colcon installs these files.
+"""
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass, field
+import importlib
+from pathlib import Path
+import sys
+
+from helpers import REPO
+import pytest
+import yaml
+
+PKG = 'ssm_localization'
+LAUNCH = REPO / 'launch'
+RVIZ = REPO / 'rviz' / 'ssm_localization.rviz'
+NAMES = yaml.safe_load((REPO / 'test' / 'data' / 'ros_jazzy_names.yaml').read_text())
+AUTOMATIC_PARAMETERS = {'use_sim_time'}      # declared by every rclpy / rclcpp node
+GLOBAL_LOCALIZER_ARGS = {'params_file', 'namespace', 'use_sim_time', 'autostart', 'index_file',
+                         'localize_on_start'}
+NODE_ACTIONS = ('Node', 'LifecycleNode')
+
+
+@dataclass
+class LaunchedNode:
+    """One ``Node(...)`` / ``LifecycleNode(...)`` action of a launch file."""
+
+    action: str
+    package: str
+    executable: str
+    name: str
+    parameters: dict = field(default_factory=dict)    # literal keys -> literal value or None
+    remappings: list = field(default_factory=list)
+    line: int = 0
+
+
+def _const(node: ast.AST):
+    """Return a literal's value (None when not a literal)."""
+    try:
+        return ast.literal_eval(node)
+    except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+        return None
+
+
+def _dict_items(node: ast.AST, function: ast.FunctionDef | None) -> dict:
+    """Literal keys of a dict display, or of a local variable built as one (plus ``d[k] = v``)."""
+    if isinstance(node, ast.Dict):
+        return {_const(k): _const(v) for k, v in zip(node.keys, node.values)
+                if k is not None and isinstance(_const(k), str)}
+    if isinstance(node, ast.Name) and function is not None:
+        out: dict = {}
+        for stmt in ast.walk(function):
+            if isinstance(stmt, ast.Assign):
+                for target in stmt.targets:
+                    if isinstance(target, ast.Name) and target.id == node.id:
+                        out.update(_dict_items(stmt.value, None))
+                    elif (isinstance(target, ast.Subscript) and isinstance(target.value, ast.Name)
+                          and target.value.id == node.id and isinstance(_const(target.slice),
+                                                                        str)):
+                        out[_const(target.slice)] = _const(stmt.value)
+        return out
+    return {}
+
+
+def _module_constants(tree: ast.Module) -> dict:
+    """Module-level ``NAME = literal`` assignments."""
+    out = {}
+    for stmt in tree.body:
+        if isinstance(stmt, ast.Assign) and len(stmt.targets) == 1 and \
+                isinstance(stmt.targets[0], ast.Name):
+            value = _const(stmt.value)
+            if value is not None:
+                out[stmt.targets[0].id] = value
+    return out
+
+
+def _value(node: ast.AST, constants: dict):
+    """Return a literal or a module constant's value."""
+    if isinstance(node, ast.Name) and node.id in constants:
+        return constants[node.id]
+    return _const(node)
+
+
+class LaunchFile:
+    """What a launch file names, read from its syntax tree."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.tree = ast.parse(path.read_text(), filename=str(path))
+        self.constants = _module_constants(self.tree)
+        self.functions = {f.name: f for f in self.tree.body if isinstance(f, ast.FunctionDef)}
+
+    def imports(self) -> list[tuple[str, str, int]]:
+        """Return (module, name, line) of every ``from module import name``."""
+        return [(n.module, a.name, n.lineno) for n in ast.walk(self.tree)
+                if isinstance(n, ast.ImportFrom) for a in n.names]
+
+    def plain_imports(self) -> list[str]:
+        return [a.name for n in ast.walk(self.tree) if isinstance(n, ast.Import) for a in n.names]
+
+    def _calls(self, name: str):
+        for function in self.functions.values():
+            for node in ast.walk(function):
+                if isinstance(node, ast.Call) and (
+                        (isinstance(node.func, ast.Name) and node.func.id == name) or
+                        (isinstance(node.func, ast.Attribute) and node.func.attr == name)):
+                    yield function, node
+
+    def declared_arguments(self) -> dict[str, str | None]:
+        """``{name: default or None}`` of every DeclareLaunchArgument."""
+        out = {}
+        for _, call in self._calls('DeclareLaunchArgument'):
+            name = _value(call.args[0], self.constants)
+            kw = {k.arg: k.value for k in call.keywords}
+            out[name] = 'default' if 'default_value' in kw else None
+        return out
+
+    def used_arguments(self) -> set[str]:
+        """Launch configurations read (``LaunchConfiguration('x')`` or ``_arg(context, 'x')``)."""
+        used = set()
+        for name in ('LaunchConfiguration', '_arg'):
+            for _, call in self._calls(name):
+                if call.args:
+                    value = _value(call.args[-1], self.constants)
+                    if isinstance(value, str):
+                        used.add(value)
+        return used
+
+    def nodes(self) -> list[LaunchedNode]:
+        out = []
+        for action in NODE_ACTIONS:
+            for function, call in self._calls(action):
+                kw = {k.arg: k.value for k in call.keywords}
+                params: dict = {}
+                for item in getattr(kw.get('parameters'), 'elts', []):
+                    params.update(_dict_items(item, function))
+                out.append(LaunchedNode(
+                    action, _value(kw['package'], self.constants),
+                    _value(kw['executable'], self.constants), _value(kw['name'], self.constants),
+                    params, _value(kw['remappings'], self.constants) if 'remappings' in kw
+                    else [], call.lineno))
+        return out
+
+    def share_files(self) -> list[str]:
+        """Paths joined onto the package share directory (``os.path.join(share, 'a', 'b')``)."""
+        out = []
+        for _, call in self._calls('join'):
+            if call.args and isinstance(call.args[0], ast.Name) and call.args[0].id == 'share':
+                parts = [_value(a, self.constants) for a in call.args[1:]]
+                if all(isinstance(p, str) for p in parts):
+                    out.append('/'.join(parts))
+        return out
+
+
+def _launch_files() -> list[Path]:
+    return sorted(LAUNCH.glob('*.launch.py'))
+
+
+def _console_scripts() -> set[str]:
+    tree = ast.parse((REPO / 'setup.py').read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == 'entry_points':
+            scripts = _const(node.value)['console_scripts']
+            return {s.split('=')[0].strip() for s in scripts}
+    raise AssertionError('setup.py has no console_scripts')
+
+
+def _data_file_globs() -> list[str]:
+    tree = ast.parse((REPO / 'setup.py').read_text())
+    globs = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                and node.func.id == 'glob':
+            globs.append(_const(node.args[0]))
+    return globs
+
+
+def _flat(d: dict, prefix: str = '') -> set[str]:
+    out = set()
+    for k, v in d.items():
+        out |= _flat(v, f'{prefix}{k}.') if isinstance(v, dict) else {prefix + k}
+    return out
+
+
+def _our_parameters(node_name: str) -> set[str]:
+    """
+    Every parameter a node of ours declares.
+
+    The generated params file lists them all (test_ros_params.py checks that against the running
+    nodes).
+    """
+    doc = yaml.safe_load((REPO / 'config' / 'ssm_localization.yaml').read_text())
+    return _flat(doc[node_name]['ros__parameters']) | AUTOMATIC_PARAMETERS
+
+
+@pytest.fixture(params=[p.name for p in _launch_files()])
+def launch_file(request) -> LaunchFile:
+    return LaunchFile(LAUNCH / request.param)
+
+
+def test_both_launch_files_exist():
+    assert {p.name for p in _launch_files()} >= {'global_localizer.launch.py',
+                                                 'nav2_localization.launch.py'}
+
+
+def test_launch_file_defines_generate_launch_description(launch_file):
+    assert 'generate_launch_description' in launch_file.functions
+    assert not launch_file.functions['generate_launch_description'].args.args
+
+
+def test_launch_file_imports_exist(launch_file):
+    """Every imported name exists in ROS 2 Jazzy (snapshot) or here (imported for real)."""
+    modules = NAMES['python_modules']
+    for module, name, line in launch_file.imports():
+        where = f'{launch_file.path.name}:{line}: from {module} import {name}'
+        top = module.split('.')[0]
+        if top in ('launch', 'launch_ros'):
+            assert module in modules, f'{where}: module not in the Jazzy snapshot'
+            assert name in modules[module], f'{where}: {module} has no {name} in Jazzy'
+        else:
+            assert top in ('ament_index_python', PKG) or top in sys.stdlib_module_names, where
+            assert hasattr(importlib.import_module(module), name), where
+    for name in launch_file.plain_imports():
+        assert name.split('.')[0] in sys.stdlib_module_names, name
+
+
+def test_launch_arguments_are_declared_and_used(launch_file):
+    declared = launch_file.declared_arguments()
+    used = launch_file.used_arguments()
+    assert used <= set(declared), f'used but not declared: {sorted(used - set(declared))}'
+    assert set(declared) <= used, f'declared but never read: {sorted(set(declared) - used)}'
+    assert GLOBAL_LOCALIZER_ARGS <= set(declared)
+    if launch_file.path.name == 'global_localizer.launch.py':
+        assert set(declared) == GLOBAL_LOCALIZER_ARGS
+        assert all(declared[a] for a in declared), 'every argument has a default'
+    else:
+        assert declared['map'] is None, 'map is required (no default)'
+
+
+def test_launched_packages_executables_and_parameters_exist(launch_file):
+    ours = _console_scripts()
+    nav2_exes = NAMES['nav2_executables']
+    nav2_params = NAMES['nav2_parameters']
+    nodes = launch_file.nodes()
+    assert nodes
+    for node in nodes:
+        where = f'{launch_file.path.name}:{node.line}: {node.package}/{node.executable}'
+        if node.package == PKG:
+            assert node.executable in ours, f'{where}: no such console script in setup.py'
+            assert node.action == 'LifecycleNode', f'{where}: our nodes are lifecycle nodes'
+            allowed = _our_parameters(node.executable)
+        else:
+            assert node.package in nav2_exes, f'{where}: not a known nav2 package'
+            assert node.executable in nav2_exes[node.package], f'{where}: no such executable'
+            allowed = set(nav2_params[f'{node.package}/{node.executable}']) | \
+                AUTOMATIC_PARAMETERS
+        unknown = sorted(set(node.parameters) - allowed)
+        assert not unknown, f'{where}: unknown parameters {unknown}'
+        if node.executable in ('global_localizer', 'amcl'):   # tf listeners
+            assert ('/tf', 'tf') in node.remappings and ('/tf_static', 'tf_static') in \
+                node.remappings, f'{where}: tf topics must follow the namespace'
+
+
+def test_lifecycle_managers_manage_launched_nodes_without_bonds_for_ours(launch_file):
+    nodes = launch_file.nodes()
+    names = {n.name: n for n in nodes}
+    managers = [n for n in nodes if n.executable == 'lifecycle_manager']
+    managed = set()
+    for manager in managers:
+        node_names = manager.parameters.get('node_names')
+        assert node_names, f'{manager.name}: node_names missing'
+        for name in node_names:
+            assert name in names, f'{manager.name} manages {name}, which is not launched'
+            managed.add(name)
+            if names[name].package == PKG:
+                # rclpy lifecycle nodes send no bond heartbeats: the manager must not wait
+                assert manager.parameters.get('bond_timeout') == 0.0, manager.name
+        assert isinstance(manager.parameters.get('autostart'), (bool, type(None)))
+    for node in nodes:
+        if node.package == PKG:
+            if node.name in managed:
+                assert node.parameters.get('autostart') is False, \
+                    f'{node.name} is managed: it must not start itself'
+        elif node.package != 'nav2_lifecycle_manager':
+            assert node.name in managed, f'nav2 node {node.name} is managed by nobody'
+
+
+def test_share_files_named_by_launch_files_exist_and_are_installed(launch_file):
+    globs = _data_file_globs()
+    files = launch_file.share_files()
+    assert files
+    for rel in files:
+        assert (REPO / rel).is_file(), f'{launch_file.path.name} loads missing {rel}'
+        assert any(Path(rel).match(g) for g in globs), f'setup.py does not install {rel}'
+
+
+def test_nav2_params_file_names_existing_nav2_parameters():
+    doc = yaml.safe_load((REPO / 'config' / 'nav2_localization.yaml').read_text())
+    known = {'map_server': 'nav2_map_server/map_server', 'amcl': 'nav2_amcl/amcl'}
+    assert set(doc) == set(known)
+    for node, key in known.items():
+        names = _flat(doc[node]['ros__parameters'])
+        unknown = sorted(names - set(NAMES['nav2_parameters'][key]) - AUTOMATIC_PARAMETERS)
+        assert not unknown, f'{node}: not nav2 Jazzy parameters: {unknown}'
+
+
+# ---------------------------------------------------------------------------- RViz
+
+EXPECTED_QOS = {   # topic -> (durability, reliability) the publishers offer
+    '/map': ('Transient Local', 'Reliable'),             # nav2 map_server
+    '/amcl_pose': ('Transient Local', 'Reliable'),       # nav2 amcl
+    '/scan': ('Volatile', 'Best Effort'),                # sensor data
+}
+
+
+def _displays(doc: dict) -> list[dict]:
+    out = []
+    stack = list(doc['Visualization Manager']['Displays'])
+    while stack:
+        display = stack.pop()
+        out.append(display)
+        stack.extend(display.get('Displays', []))
+    return out
+
+
+def test_rviz_config_uses_known_classes_and_the_map_frame():
+    doc = yaml.safe_load(RVIZ.read_text())
+    classes = set(NAMES['rviz_classes'])
+    used = [d['Class'] for d in _displays(doc)]
+    used += [t['Class'] for t in doc['Visualization Manager']['Tools']]
+    used += [p['Class'] for p in doc['Panels']]
+    used.append(doc['Visualization Manager']['Views']['Current']['Class'])
+    unknown = sorted(set(used) - classes)
+    assert not unknown, f'not RViz Jazzy classes: {unknown}'
+    assert doc['Visualization Manager']['Global Options']['Fixed Frame'] == 'map'
+
+
+def test_rviz_config_shows_our_topics_with_matching_qos():
+    doc = yaml.safe_load(RVIZ.read_text())
+    topics = {d['Topic']['Value']: d for d in _displays(doc) if 'Topic' in d}
+    for topic in ('/map', '/global_pose', '/candidates', '/topological_map'):
+        assert topic in topics, f'{topic} is not shown'
+    latched = ('/global_pose', '/candidates', '/topological_map')
+    expected = {**EXPECTED_QOS, **{t: ('Transient Local', 'Reliable') for t in latched}}
+    for topic, (durability, reliability) in expected.items():
+        if topic in topics:
+            qos = topics[topic]['Topic']
+            assert qos['Durability Policy'] == durability, topic
+            assert qos['Reliability Policy'] == reliability, topic
