@@ -125,7 +125,8 @@ def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> s
 
     Stages, first that applies: no hypothesis near the truth at all; lost in refinement; refined
     but not among the verified; ranked below a wrong pose; right but refused (ambiguous: a rival /
-    degenerate geometry; failed: explains too little).
+    degenerate geometry / a confidence below ``min_confidence``; failed: explains too little / a
+    confidence below one half).
     """
     if loc.status == 'ok' and within_success(loc.pose, truth):
         return None
@@ -141,8 +142,13 @@ def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> s
     if not within_success(loc.pose, truth):
         return f'ranked below a wrong pose ({loc.status})'
     if loc.status == 'ambiguous':
-        return ('right but ambiguous: degenerate geometry' if loc.message.startswith('degenerate')
-                else 'right but ambiguous: a rival within the margin')
+        if loc.message.startswith('degenerate'):
+            return 'right but ambiguous: degenerate geometry'
+        if loc.message.startswith('low confidence'):
+            return 'right but ambiguous: confidence below min_confidence'
+        return 'right but ambiguous: a rival within the margin'
+    if loc.message.startswith('the best pose is more likely wrong'):
+        return 'right but failed: confidence below one half'
     return 'right but failed: explains too little'
 
 
