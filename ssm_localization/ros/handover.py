@@ -18,6 +18,7 @@ import threading
 from typing import Any, Callable
 
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.clock import Clock, ClockType
 from ssm_localization.ros.conversions import pose_from_msg, stamp_to_ns
 from ssm_localization.ros.qos import LATCHED_QOS
 from ssm_localization.transforms import wrap_angle
@@ -67,8 +68,11 @@ class HandOver:
             self._sub = node.create_subscription(
                 PoseWithCovarianceStamped, config.confirm_topic, self._on_confirmation,
                 LATCHED_QOS, callback_group=callback_group)
+            # steady time: retries are about processes starting, and go on in simulation
+            # before /clock runs
             self._timer = node.create_timer(config.period, self._tick,
-                                            callback_group=callback_group)
+                                            callback_group=callback_group,
+                                            clock=Clock(clock_type=ClockType.STEADY_TIME))
             self._timer.cancel()
 
     @property
