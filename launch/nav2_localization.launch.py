@@ -44,7 +44,9 @@ from ssm_localization.ros.launch_support import (amcl_equivalents, full_namespac
 
 PACKAGE = 'ssm_localization'
 TF_REMAPS = [('/tf', 'tf'), ('/tf_static', 'tf_static')]
-NAV2_SERVICE = 'reinitialize_global_localization'
+# global_localizer answers the behavior tree's reinitialize_global_localization: AMCL's moves
+AMCL_REMAPS = [('/tf', 'tf'), ('/tf_static', 'tf_static'),
+               ('reinitialize_global_localization', 'amcl/reinitialize_global_localization')]
 
 
 def _arg(context, name):
@@ -74,13 +76,11 @@ def _nodes(context):
     if index_file:
         localizer['index_file'] = os.path.expanduser(index_file)
     extra = _arg(context, 'localizer_params_file')
-    localizer_params = [from_amcl, nav2_params]
-    if extra:
-        localizer_params.append(namespaced_params_file(extra, root))
+    extra_params = [namespaced_params_file(extra, root)] if extra else []
+    map_file = {}
     map_yaml = _arg(context, 'map')
-    map_server_params = [nav2_params]
-    if map_yaml:
-        map_server_params.append({'yaml_filename': os.path.expanduser(map_yaml)})
+    if map_yaml:            # else map_server's yaml_filename from params_file, as nav2's
+        map_file['yaml_filename'] = os.path.expanduser(map_yaml)
     actions = []
     use_sim_time = _arg(context, 'use_sim_time')
     if use_sim_time:        # empty: keep a parent's SetParameter('use_sim_time', ...)
@@ -99,7 +99,7 @@ def _nodes(context):
             output='screen',
             respawn=respawn,
             respawn_delay=2.0,
-            parameters=map_server_params,
+            parameters=[nav2_params, map_file],
             arguments=log_args,
             remappings=TF_REMAPS,
         ),
@@ -113,8 +113,7 @@ def _nodes(context):
             respawn_delay=2.0,
             parameters=[nav2_params],
             arguments=log_args,
-            # global_localizer answers the behavior tree's reinitialize_global_localization
-            remappings=[*TF_REMAPS, (NAV2_SERVICE, 'amcl/' + NAV2_SERVICE)],
+            remappings=AMCL_REMAPS,
         ),
         Node(
             package='nav2_lifecycle_manager',
@@ -133,7 +132,7 @@ def _nodes(context):
             output='screen',
             respawn=respawn,
             respawn_delay=2.0,
-            parameters=[*localizer_params, localizer],
+            parameters=[from_amcl, nav2_params, *extra_params, localizer],
             arguments=log_args,
             remappings=TF_REMAPS,
         ),
