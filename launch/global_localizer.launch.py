@@ -22,8 +22,8 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, SetParameter
-from ssm_localization.ros.launch_support import (full_namespace, launch_bool, namespaced_params_file,
-                                                 node_namespace)
+from ssm_localization.ros.launch_support import (full_namespace, launch_bool,
+                                                 namespaced_params_file, node_namespace)
 
 PACKAGE = 'ssm_localization'
 TF_REMAPS = [('/tf', 'tf'), ('/tf_static', 'tf_static')]
