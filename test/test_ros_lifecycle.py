@@ -208,8 +208,9 @@ def test_rviz_config_qos_matches_the_publishers(ros):
                                       if i.node_name == 'global_localizer'], 5)
         assert infos, f'global_localizer does not publish {topic}'
         qos = infos[0].qos_profile
-        assert displays[topic]['Durability Policy'] == durability[qos.durability], topic
-        assert displays[topic]['Reliability Policy'] == reliability[qos.reliability], topic
+        shown = displays[topic.lstrip('/')]          # relative in the RViz config
+        assert shown['Durability Policy'] == durability[qos.durability], topic
+        assert shown['Reliability Policy'] == reliability[qos.reliability], topic
 
 
 def test_autostart_and_localize_on_start_hand_over_on_initialpose(ros, bag):

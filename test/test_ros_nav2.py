@@ -16,6 +16,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 import pytest
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ssm_localization import simulate, SimulationConfig
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
@@ -67,9 +68,16 @@ def _truth(sim, msg):
 # ---------------------------------------------------------------------------- the BT service
 
 def test_reinitialize_service_exists_only_when_configured_to_replace_amcls(ros):
-    LocalizerRig(ros, autostart=False)
+    rig = LocalizerRig(ros, autostart=False)
     client = ros.node.create_client(Empty, 'reinitialize_global_localization')
     assert not client.wait_for_service(timeout_sec=1.0)
+    # set while unconfigured: served from the next configure on
+    assert rig.node.set_parameters([Parameter('serve_reinitialize_global_localization',
+                                              value=True)])[0].successful
+    change = ros.node.create_client(ChangeState, 'global_localizer/change_state')
+    assert ros.call(change, ChangeState.Request(
+        transition=Transition(id=Transition.TRANSITION_CONFIGURE))).success
+    assert client.wait_for_service(timeout_sec=5.0)
 
 
 def test_bt_call_is_not_answered_when_no_search_can_start(ros, world, capfd):

@@ -240,21 +240,11 @@ def configs_from_params(params: dict) -> Configs:
             raise ValueError(f'parameter {name}: the laser pose on the robot base is set once, '
                              'with laser_x, laser_y and laser_yaw')
     pose = laser_pose_of_section(params) or (0.0, 0.0, 0.0)
-    index_cfg = _group_config(IndexConfig, params, 'index')
-    loc_cfg = _group_config(LocalizerConfig, params, 'localizer')
+    index_cfg = from_dict(IndexConfig, params.get('index'), 'index.')
+    loc_cfg = from_dict(LocalizerConfig, params.get('localizer'), 'localizer.')
+    track_cfg = from_dict(TrackerConfig, params.get('tracker'), 'tracker.')
     return Configs(dataclasses.replace(index_cfg, sensor_pose=pose),
-                   dataclasses.replace(loc_cfg, laser_pose=pose),
-                   _group_config(TrackerConfig, params, 'tracker'))
-
-
-def _group_config(cls: type[T], params: dict, group: str) -> T:
-    """Return ``cls`` from ``params[group]``; an error names the group (``tracker.*: ...``)."""
-    try:
-        return from_dict(cls, params.get(group), group + '.')
-    except ValueError as exc:
-        if f'{group}.' in str(exc):
-            raise
-        raise ValueError(f'{group}.*: {exc}') from None
+                   dataclasses.replace(loc_cfg, laser_pose=pose), track_cfg)
 
 
 def load_all_configs(path: str | Path | None, node: str = 'global_localizer') -> Configs:

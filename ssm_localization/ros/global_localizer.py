@@ -161,10 +161,7 @@ class GlobalLocalizerNode(LifecycleNode):
                             qos_profile=SERVICE_QOS, callback_group=self._group)
         # nav2's behavior tree checks the service exists when it loads the tree: from the start
         self._nav2_service = None
-        if values['serve_reinitialize_global_localization']:
-            self._nav2_service = create_withholding_service(
-                self, Empty, NAV2_SERVICE, self._on_reinitialize, qos_profile=SERVICE_QOS,
-                callback_group=self._group)
+        self._serve_nav2_service(bool(values['serve_reinitialize_global_localization']))
         # a pose on initialpose is kept in every state (track mode takes it as its prior)
         self.create_subscription(PoseWithCovarianceStamped, 'initialpose', self._on_initialpose,
                                  INITIALPOSE_QOS, callback_group=self._group)
@@ -181,6 +178,7 @@ class GlobalLocalizerNode(LifecycleNode):
             return FAILURE
         values = self._guard.values()
         configs = node_configs(values)
+        self._serve_nav2_service(bool(values['serve_reinitialize_global_localization']))
         self.mode = str(values['mode'])
         self.base_frame = str(values['base_frame']).lstrip('/')
         self.map_frame_param = str(values['map_frame'])
@@ -225,6 +223,9 @@ class GlobalLocalizerNode(LifecycleNode):
                                    self._no_scan_text)
         if self.mode == 'track':
             self._configure_tracking(values, configs.tracker)
+        else:
+            with self._state_lock:
+                self._early_prior = None          # only track mode takes initialpose
         self._configured_parts = True
         self.get_logger().info(f'configured: mode {self.mode}, base frame {self.base_frame}; '
                                f'map: {self.source.map_state().detail}')
@@ -551,6 +552,16 @@ class GlobalLocalizerNode(LifecycleNode):
     def _on_global_localization(self, request: Empty.Request, response: Empty.Response):
         self._localize_next_scan('global_localization')
         return response
+
+    def _serve_nav2_service(self, serve: bool) -> None:
+        """Create or destroy ``reinitialize_global_localization`` (start-up and configure)."""
+        if serve and self._nav2_service is None:
+            self._nav2_service = create_withholding_service(
+                self, Empty, NAV2_SERVICE, self._on_reinitialize, qos_profile=SERVICE_QOS,
+                callback_group=self._group)
+        elif not serve and self._nav2_service is not None:
+            self.destroy_service(self._nav2_service)
+            self._nav2_service = None
 
     def _on_reinitialize(self, request: Empty.Request,
                          response: Empty.Response) -> Empty.Response | None:

@@ -88,12 +88,20 @@ def laser_pose_of(values: dict[str, Any]) -> tuple[float, float, float]:
     return (float(values['laser_x']), float(values['laser_y']), float(values['laser_yaw']))
 
 
+#: the parameter group of each config class (a refusal names the group)
+CONFIG_GROUPS = {'IndexConfig': 'index', 'TopologyConfig': 'index.topology',
+                 'MatcherConfig': 'index.matcher', 'LocalizerConfig': 'localizer',
+                 'TrackerConfig': 'tracker'}
+
+
 def config_problem(values: dict[str, Any]) -> str | None:
     """Why the core refuses the configs of these parameter values, or None."""
     try:
         node_configs(values)
     except (ValueError, TypeError) as exc:
-        return f'invalid parameters: {exc}'
+        text = str(exc)
+        group = next((g for cls, g in CONFIG_GROUPS.items() if text.startswith(cls)), None)
+        return f'invalid {group}.* parameters: {text}' if group else f'invalid parameters: {text}'
     return None
 
 
@@ -154,7 +162,7 @@ NODE_PARAMS: dict[str, tuple[Any, str]] = {
         False, "serve nav2's reinitialize_global_localization (std_srvs/Empty, the "
                "ReinitializeGlobalLocalization behavior-tree node) in place of AMCL's: answered "
                'at once when a search starts, not answered when none can (no scan, no map, not '
-               'active). Read at start'),
+               'active). Read at start-up and at configure'),
     'scan_timeout': (5.0, 'relocalize fails when no scan arrives within this many seconds; '
                           'reinitialize_global_localization needs a scan this recent'),
     'publish_tf': (True, 'track mode: broadcast map -> odom (where tf2_ros exists), as AMCL '
