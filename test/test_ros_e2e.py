@@ -190,10 +190,12 @@ def test_map_indexer_process_writes_index_that_global_localizer_loads(ros, tmp_p
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_idle_node_process_exits_promptly_on_a_signal(ros, tmp_path, sig):
     """
-    ``ros2 run`` then Ctrl-C (or launch's SIGTERM): the idle node is gone within 5 s, each time.
+    ``ros2 run`` then Ctrl-C (or launch's SIGTERM): the node is gone within 5 s, each time.
 
     Its executor has many threads (one per waiting service call); a missed wake-up of its wait
-    set once left it running after the signal in a third of the tries.
+    set once left an idle node running after the signal in a third of the tries. The signal may
+    also come while the node still declares its parameters (its lifecycle services are up
+    already): a clean exit too, status 0.
     """
     for attempt in range(4):
         proc = subprocess.Popen(
@@ -212,6 +214,7 @@ def test_idle_node_process_exits_promptly_on_a_signal(ros, tmp_path, sig):
             if proc.poll() is None:
                 proc.kill()
                 proc.wait(5)
+            output = proc.stdout.read().decode(errors='replace')[-3000:]
             proc.stdout.close()
-        assert took < 5.0, f'attempt {attempt}: {took:.1f} s after {sig.name}'
-        assert code in (0, -sig), f'attempt {attempt}: exit code {code}'
+        assert took < 5.0, f'attempt {attempt}: {took:.1f} s after {sig.name}\n{output}'
+        assert code in (0, -sig), f'attempt {attempt}: exit code {code}\n{output}'

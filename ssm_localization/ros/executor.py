@@ -29,11 +29,13 @@ def spin(node_factory: Callable[[], Node], args: list[str] | None = None,
             executor.spin_once(timeout_sec=WAKE_PERIOD)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (ValueError, ParameterException) as exc:  # bad parameters
-        if node is not None:
-            raise
-        print(f'error: {exc}', file=sys.stderr)
-        return 2
+    except Exception as exc:  # noqa: BLE001 - re-raised unless a signal or bad parameters
+        if node is None and not rclpy.ok():
+            return 0        # SIGINT / SIGTERM while the node was being made: the context is gone
+        if node is None and isinstance(exc, (ValueError, ParameterException)):
+            print(f'error: {exc}', file=sys.stderr)              # bad parameters
+            return 2
+        raise
     finally:
         if node is not None:
             node.destroy_node()
