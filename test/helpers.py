@@ -187,8 +187,8 @@ class LocalizerRig:
 
     def wait_ready(self, timeout: float = 120.0) -> bool:
         """Wait until the node serves an index of the newest map."""
-        return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout,
-                                      0.05))
+        return bool(self.ros.wait_for(
+            lambda: self.node.map_state().phase.reported == 'ready', timeout, 0.05))
 
     def call(self, client, request, scan=None, timeout: float = 30.0):
         """Call a service; publish ``scan`` every 50 ms until the answer arrives."""

@@ -84,19 +84,20 @@ def laser_pose_of_section(section: dict) -> tuple[float, float, float] | None:
 
 #: keys of a flat params file; a ROS params file may also hold the nodes' own parameters
 KNOWN_TOP_LEVEL = ('index', 'localizer', 'tracker', 'laser_x', 'laser_y', 'laser_yaw')
+#: config fields that hold the laser pose on the base: set from laser_x/laser_y/laser_yaw only
+LASER_POSE_FIELDS = ('index.sensor_pose', 'localizer.laser_pose')
 
 
 def _node_params(data: dict, node: str) -> dict:
     """
-    Return the (unflattened) parameters of ``node`` in a loaded params file.
+    Return the parameters of ``node`` in a loaded params file.
 
     Unknown keys of a flat file raise ``ValueError``.
     """
     ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
     section = node_section(data, node)
-    if any('.' in str(k) for k in section):
-        section = unflatten({str(k): v for k, v in section.items()})
-    unknown = sorted(str(k) for k in section if k not in KNOWN_TOP_LEVEL)
+    unknown = sorted(str(k) for k in section
+                     if str(k).split('.')[0] not in KNOWN_TOP_LEVEL)
     if unknown and not ros_file:
         raise ValueError(f'unknown parameter {echo(unknown[0])} (known: '
                          f'{", ".join(KNOWN_TOP_LEVEL)})')
@@ -111,21 +112,40 @@ class Configs(NamedTuple):
     tracker: TrackerConfig
 
 
+def configs_from_params(params: dict) -> Configs:
+    """
+    Return the index, localizer and tracker configs of a node's parameters.
+
+    The one way from parameters to configs: params files (:func:`load_all_configs`,
+    :func:`load_index_config`) and the ROS nodes' parameter values come through here.
+    ``params`` holds nested mappings or dotted names (``index.beams``); keys other than
+    ``index``, ``localizer``, ``tracker`` and ``laser_x/laser_y/laser_yaw`` are left to the
+    caller. The laser pose on the base is one value, ``laser_x/laser_y/laser_yaw``: it is set on
+    both configs that carry it (:data:`LASER_POSE_FIELDS`, refused as parameters).
+    """
+    if any('.' in str(k) for k in params):
+        params = unflatten({str(k): v for k, v in params.items()})
+    for name in LASER_POSE_FIELDS:
+        group, leaf = name.split('.')
+        section = params.get(group)
+        if isinstance(section, dict) and leaf in section:
+            raise ValueError(f'parameter {name}: the laser pose on the robot base is set once, '
+                             'with laser_x, laser_y and laser_yaw')
+    pose = laser_pose_of_section(params) or (0.0, 0.0, 0.0)
+    index_cfg = from_dict(IndexConfig, params.get('index'), 'index.')
+    loc_cfg = from_dict(LocalizerConfig, params.get('localizer'), 'localizer.')
+    track_cfg = from_dict(TrackerConfig, params.get('tracker'), 'tracker.')
+    return Configs(dataclasses.replace(index_cfg, sensor_pose=pose),
+                   dataclasses.replace(loc_cfg, laser_pose=pose), track_cfg)
+
+
 def load_all_configs(path: str | Path | None, node: str = 'global_localizer') -> Configs:
     """Return the index, localizer and tracker configs of a params file, read once."""
     data = load_yaml_mapping(path) if path else {}
     try:
-        section = _node_params(data, node)
-        index_cfg = from_dict(IndexConfig, section.get('index'), 'index.')
-        loc_cfg = from_dict(LocalizerConfig, section.get('localizer'), 'localizer.')
-        pose = laser_pose_of_section(section)
-        if pose is not None:    # the laser pose on the base feeds both configs
-            index_cfg = dataclasses.replace(index_cfg, sensor_pose=pose)
-            loc_cfg = dataclasses.replace(loc_cfg, laser_pose=pose)
-        track_cfg = from_dict(TrackerConfig, section.get('tracker'), 'tracker.')
+        return configs_from_params(_node_params(data, node))
     except (TypeError, ValueError) as exc:
         raise ValueError(f'{path}: {exc}') from None
-    return Configs(index_cfg, loc_cfg, track_cfg)
 
 
 def load_configs(path: str | Path | None, node: str = 'global_localizer'):
@@ -143,44 +163,50 @@ def load_index_config(path: str | Path) -> IndexConfig:
     """
     :class:`IndexConfig` from a YAML params file (see :func:`load_yaml_mapping`).
 
-    Accepts a flat mapping of IndexConfig / TopologyConfig field names (nested ``topology:`` and
-    ``matcher:`` mappings allowed), a ROS params file ``map_indexer: ros__parameters: {...}``
-    (dotted names allowed; keys that are not index parameters are left to the node), or a
-    ``global_localizer`` params file with an ``index:`` section.
+    Accepts a node's parameters (``index:`` section, ``laser_*``) as :func:`load_all_configs`
+    does, from a ``map_indexer`` (else ``global_localizer``) section of a ROS params file or a
+    flat file; and the short form of ``ssm_localization index --params``: IndexConfig /
+    TopologyConfig field names at the top level (nested ``topology:`` and ``matcher:`` mappings
+    allowed, ``sensor_pose`` for the laser pose; keys of a ROS file that are no index
+    parameters are left to the node).
     """
     data = load_yaml_mapping(path)
     try:
-        return _index_config_of(data)
-    except ValueError as exc:
+        return configs_from_params(_index_params(data)).index
+    except (TypeError, ValueError) as exc:
         raise ValueError(f'{path}: {exc}') from None
 
 
-def _index_config_of(data: dict) -> IndexConfig:
-    """:func:`load_index_config` on the loaded file."""
+def _index_params(data: dict) -> dict:
+    """Return a file of :func:`load_index_config` as a node's parameters."""
     ros = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
     section = node_section(data, 'map_indexer') if ros else data
     if ros and not section:
         section = node_section(data, 'global_localizer')
     if any('.' in str(key) for key in section):
-        section = unflatten(section)
-    laser = laser_pose_of_section(section)
+        section = unflatten({str(k): v for k, v in section.items()})
     if 'index' in section:
-        section = _mapping(section['index'], 'parameters index')
+        return section
     idx_names = {f.name for f in dataclasses.fields(IndexConfig)}
     topo_names = {f.name for f in dataclasses.fields(TopologyConfig)}
-    topo = dict(_mapping(section.get('topology'), 'parameters topology'))
-    kwargs = {}
+    index = {'topology': dict(_mapping(section.get('topology'), 'parameters topology'))}
+    out: dict = {'index': index}
     for key, value in section.items():
         if key == 'topology':
             continue
-        if key in idx_names:
-            kwargs[key] = value
+        if key == 'sensor_pose':
+            pose = list(value) if isinstance(value, (list, tuple)) else [value]
+            if len(pose) != 3:
+                raise ValueError(f'parameter sensor_pose: expected [x, y, yaw], got {echo(value)}')
+            out.update(zip(('laser_x', 'laser_y', 'laser_yaw'), pose))
+        elif key in ('laser_x', 'laser_y', 'laser_yaw'):
+            out[key] = value
+        elif key in idx_names:
+            index[key] = value
         elif key in topo_names:
-            topo[key] = value
+            index['topology'][key] = value
         elif not ros:
-            kwargs[key] = value  # from_dict names the unknown key
-    if topo:
-        kwargs['topology'] = topo
-    if laser is not None:           # the nodes' laser_x/y/yaw: the laser on the base
-        kwargs['sensor_pose'] = list(laser)
-    return from_dict(IndexConfig, kwargs)
+            index[key] = value  # from_dict names the unknown key
+    if not index['topology']:
+        del index['topology']
+    return out

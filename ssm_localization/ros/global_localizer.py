@@ -4,37 +4,49 @@
 Lifecycle (rclpy.lifecycle; ``NODE/get_state``, ``NODE/change_state``):
 
 - unconfigured: parameters declared and validated; the services answer that the node is not
-  active. With ``autostart`` (default) the node configures and activates itself;
-- configure: reads the parameters, loads ``index_file`` or waits for a map on ``map`` (both are
-  watched: see :mod:`ssm_localization.ros.index_source`), creates the publishers;
+  active. With ``autostart`` (default; for ``ros2 run``) the node configures and activates
+  itself; under a lifecycle manager ``autostart`` must be false (the launch files set it);
+- configure: reads the parameters, loads ``index_file`` or waits for a map on ``map_topic``
+  (both are watched: see :mod:`ssm_localization.ros.index_source`), creates the publishers;
 - activate: scans are taken, the services localize, ``continuous`` mode runs, ``track`` mode
   tracks, ``localize_on_start`` localizes the first scans until an ``ok`` pose,
   ``/diagnostics`` ticks;
 - deactivate / cleanup / shutdown undo those steps; waiting calls get an answer saying why.
 
-Interfaces (docs INTERFACES.md): subscribes ``scan`` (LaserScan, sensor-data QoS) and ``map``
-(OccupancyGrid, transient local); publishes ``global_pose`` (PoseWithCovarianceStamped,
-transient local), ``initialpose`` (with ``publish_initialpose``), ``candidates`` (PoseArray,
-transient local), ``topological_map`` (MarkerArray, transient local) and ``/diagnostics``;
-serves ``relocalize`` (std_srvs/Trigger) and ``global_localization`` (std_srvs/Empty), both
-"localize the next scan and publish".
+A scan's way to a published pose, in this file's order: ``_on_scan`` stores it in the mailbox;
+a service call (``RequestQueue`` worker -> ``_serve``) or a mode loop (``_each_scan``) takes
+it to ``_localize`` / ``_track``, which ``_prepare`` it (ready index, scan checks, laser mount;
+:class:`Refused` says why not), run the core and ``_publish`` the result (``global_pose``,
+``candidates``, markers, and the hand-over on ``initialpose``).
 
-``mode: track`` (issue 11) tracks every scan with odometry (``localization/tracker.py``, glue in
+Interfaces (docs/ROS_API.md): subscribes ``scan_topic`` (LaserScan, sensor-data QoS) and
+``map_topic`` (OccupancyGrid, transient local); publishes ``global_pose``
+(PoseWithCovarianceStamped, transient local), ``initialpose`` (with ``publish_initialpose``:
+republished until ``handover_confirm_topic`` confirms it, :mod:`ssm_localization.ros.handover`),
+``candidates`` (PoseArray, transient local), ``topological_map`` (MarkerArray, transient local)
+and ``/diagnostics``; serves ``relocalize`` (std_srvs/Trigger) and ``global_localization``
+(std_srvs/Empty), both "localize the next scan and publish", and with
+``serve_reinitialize_global_localization`` nav2's ``reinitialize_global_localization``
+(std_srvs/Empty): answered at once when a search starts, not answered when it cannot start.
+
+``mode: track`` tracks every scan with odometry (``localization/tracker.py``, glue in
 :mod:`ssm_localization.ros.tracking`): it subscribes ``odom`` (nav_msgs/Odometry; TF
-``odom_frame`` <- ``base_frame`` when the topic is silent and tf2_ros exists) and ``initialpose``
-(a prior), publishes ``global_pose`` for every scan tracked ``ok``, relocalizes globally by itself
-when the track is lost, and broadcasts map -> odom with ``publish_tf`` where tf2_ros exists, as
-AMCL does. The services' answers become the tracker's prior.
+``odom_frame`` <- ``base_frame`` when the topic is silent and tf2_ros exists) and takes
+``initialpose`` as its prior (also one received before configure or activation), publishes
+``global_pose`` for every scan tracked ``ok``, relocalizes globally by itself when the track is
+lost, and broadcasts map -> odom with ``publish_tf`` where tf2_ros exists, as AMCL does. The
+services' answers become the tracker's prior.
 """
 from __future__ import annotations
 
-from concurrent.futures import TimeoutError as FutureTimeout
+from concurrent.futures import Future, TimeoutError as FutureTimeout
+from dataclasses import dataclass
 from functools import partial
 import math
 from pathlib import Path
 import threading
 import time
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
@@ -43,17 +55,15 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
-from ssm_localization.config import IndexConfig, LocalizerConfig, TrackerConfig
-from ssm_localization.localization.localizer import GlobalLocalizer
-from ssm_localization.localization.tracker import TrackResult
-from ssm_localization.mapping.index import build_index, load_index, save_index
+from ssm_localization.localization.localizer import GlobalLocalizer, Localization
 from ssm_localization.ros import markers
 from ssm_localization.ros.conversions import (pose_array, pose_with_covariance, scan_args_from_msg,
                                               scan_points, scan_problem, ScanArgs)
 from ssm_localization.ros.diagnostics import diagnostic_array, localization_status
 from ssm_localization.ros.executor import spin
-from ssm_localization.ros.index_builder import IndexBuilder
-from ssm_localization.ros.index_source import IndexSource, ServedIndex
+from ssm_localization.ros.handover import HandOver, HandOverConfig
+from ssm_localization.ros.index_source import (IndexPhase, IndexSource, IndexWork, MapState,
+                                               ServedIndex)
 from ssm_localization.ros.laser_pose import LaserMount, LaserPoseSource
 from ssm_localization.ros.lifecycle import (answer_invalid_transitions, configured_state,
                                             FAILURE, schedule_autostart, state_label, SUCCESS,
@@ -61,11 +71,11 @@ from ssm_localization.ros.lifecycle import (answer_invalid_transitions, configur
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.odometry import MapOdomBroadcaster, OdometryBuffer, OdometrySource
 from ssm_localization.ros.parameter_guard import ParameterGuard
-from ssm_localization.ros.parameters import (build_config, config_problem, DYNAMIC,
-                                             laser_pose_of, LOCALIZER_CONFIGS,
-                                             localizer_parameters)
+from ssm_localization.ros.parameters import (config_problem, DYNAMIC, laser_pose_of,
+                                             localizer_parameters, node_configs)
 from ssm_localization.ros.qos import LATCHED_QOS, SERVICE_QOS
-from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox
+from ssm_localization.ros.requests import Answer, Refused, RequestQueue, ScanMailbox
+from ssm_localization.ros.services import create_withholding_service
 from ssm_localization.ros.tracking import TrackSession
 from std_srvs.srv import Empty, Trigger
 from visualization_msgs.msg import MarkerArray
@@ -79,13 +89,43 @@ EXECUTOR_THREADS = MAX_QUEUED_CALLS + 8
 ANSWER_SLACK = 120.0         # s beyond scan_timeout a call waits for the localization itself
 # odometry: best effort matches every publisher; room for the messages between two scans
 ODOM_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+# initialpose: reliable and volatile, as RViz and nav2 publish it and AMCL subscribes it
+INITIALPOSE_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+NAV2_SERVICE = 'reinitialize_global_localization'
+
+T = TypeVar('T')
 
 
-def format_result(loc: Any) -> str:
+def format_result(loc: Localization) -> str:
     """One line for the service answer / log: pose, node, status, score, latency."""
     x, y, yaw = loc.pose
     return (f'x={x:.3f} y={y:.3f} yaw={yaw:.4f} node={loc.node} status={loc.status} '
             f'score={float(loc.score):.3f} latency_ms={float(loc.latency_ms):.1f}')
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A scan ready for the core: its arguments, the laser mount, the index and localizer."""
+
+    msg: LaserScan
+    args: ScanArgs
+    mount: LaserMount
+    served: ServedIndex
+    localizer: GlobalLocalizer
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What became of one localized scan: the result, and whether a pose was published."""
+
+    localization: Localization
+    published: bool
+
+    @property
+    def reason(self) -> str:
+        """Why no pose was published (empty when one was)."""
+        loc = self.localization
+        return '' if self.published else f'{loc.status}: {loc.message}'
 
 
 class GlobalLocalizerNode(LifecycleNode):
@@ -95,8 +135,7 @@ class GlobalLocalizerNode(LifecycleNode):
         super().__init__('global_localizer', **kwargs)
         answer_invalid_transitions(self)
         self._guard = ParameterGuard(self, localizer_parameters(), DYNAMIC, {'mode': MODES},
-                                     partial(configured_state, self),
-                                     partial(config_problem, LOCALIZER_CONFIGS))
+                                     partial(configured_state, self), config_problem)
         values = self._guard.declare()
         self._group = ReentrantCallbackGroup()
         self._mailbox = ScanMailbox()
@@ -104,9 +143,10 @@ class GlobalLocalizerNode(LifecycleNode):
         self._stop = threading.Event()
         self._localize_lock = threading.Lock()   # one localization at a time
         self._state_lock = threading.Lock()      # guards the fields below
-        self._last: Any = None                   # the last Localization (diagnostics)
+        self._last: Localization | None = None   # the last localization (diagnostics)
         self._index_marks: list = []
         self._marks_frame = ''
+        self._early_prior: PoseWithCovarianceStamped | None = None   # initialpose before track
         self._last_markers = 0.0
         self._configured_parts = False
         self._workers: list[threading.Thread] = []
@@ -119,6 +159,12 @@ class GlobalLocalizerNode(LifecycleNode):
                             qos_profile=SERVICE_QOS, callback_group=self._group)
         self.create_service(Empty, 'global_localization', self._on_global_localization,
                             qos_profile=SERVICE_QOS, callback_group=self._group)
+        # nav2's behavior tree checks the service exists when it loads the tree: from the start
+        self._nav2_service = None
+        self._serve_nav2_service(bool(values['serve_reinitialize_global_localization']))
+        # a pose on initialpose is kept in every state (track mode takes it as its prior)
+        self.create_subscription(PoseWithCovarianceStamped, 'initialpose', self._on_initialpose,
+                                 INITIALPOSE_QOS, callback_group=self._group)
         if values['autostart']:
             schedule_autostart(self)
         else:
@@ -131,18 +177,18 @@ class GlobalLocalizerNode(LifecycleNode):
         if self._destroying:
             return FAILURE
         values = self._guard.values()
+        configs = node_configs(values)
+        self._serve_nav2_service(bool(values['serve_reinitialize_global_localization']))
         self.mode = str(values['mode'])
         self.base_frame = str(values['base_frame']).lstrip('/')
         self.map_frame_param = str(values['map_frame'])
         self.laser_pose = laser_pose_of(values)
-        self.index_config = build_config(IndexConfig, 'index', values, self.laser_pose)
-        self.localizer_config = build_config(LocalizerConfig, 'localizer', values,
-                                             self.laser_pose)
+        self.index_config, self.localizer_config = configs.index, configs.localizer
         self.rate = float(values['rate'])
         self.max_map_cells = int(values['max_map_cells'])
         self.max_gvd_points = int(values['max_gvd_points'])
         index_file = str(values['index_file'])
-        index_path = Path(index_file).expanduser() if index_file else None
+        scan_topic, map_topic = str(values['scan_topic']), str(values['map_topic'])
 
         self._laser = LaserPoseSource.for_node(self, self.base_frame, self.laser_pose,
                                                self.get_logger().info)
@@ -152,33 +198,37 @@ class GlobalLocalizerNode(LifecycleNode):
         self.pose_pub = self.create_lifecycle_publisher(PoseWithCovarianceStamped,
                                                         'global_pose', LATCHED_QOS)
         self.initialpose_pub = self.create_lifecycle_publisher(
-            PoseWithCovarianceStamped, 'initialpose',
-            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE))
+            PoseWithCovarianceStamped, 'initialpose', INITIALPOSE_QOS)
+        self.handover = HandOver(self, self.initialpose_pub, HandOverConfig(
+            str(values['handover_confirm_topic']), float(values['handover_period']),
+            int(values['handover_tries']), float(values['handover_tolerance'])),
+            self._group, self.get_logger())
         self.candidates_pub = self.create_lifecycle_publisher(PoseArray, 'candidates',
                                                               LATCHED_QOS)
         self.marker_pub = self.create_lifecycle_publisher(MarkerArray, 'topological_map',
                                                           LATCHED_QOS)
         self.diagnostics_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics',
                                                                10)
-        self.builder = IndexBuilder(self.get_logger(), self._on_index_done,
-                                    self._on_index_error)
         self.source = IndexSource(
-            self.builder, self.get_logger(), index_path, self.resolve_topic_name('map'),
-            partial(load_index, max_cells=self.max_map_cells), self._build, self._make_served,
-            save_index, self._on_ready, self._on_frame)
+            IndexWork(configs.index, configs.localizer, self.max_map_cells), self.get_logger(),
+            Path(index_file).expanduser() if index_file else None,
+            self.resolve_topic_name(map_topic), self._on_served)
         self.source.start()      # before the map subscription: a latched map may come at once
-        self._map_sub = self.create_subscription(OccupancyGrid, 'map', self._on_map,
+        self._map_sub = self.create_subscription(OccupancyGrid, map_topic, self._on_map,
                                                  LATCHED_QOS, callback_group=self._group)
-        self._scan_sub = self.create_subscription(LaserScan, 'scan', self._on_scan,
+        self._scan_sub = self.create_subscription(LaserScan, scan_topic, self._on_scan,
                                                   qos_profile_sensor_data,
                                                   callback_group=self._group)
         self._queue = RequestQueue(self._mailbox, MAX_QUEUED_CALLS, self._serve,
                                    self._no_scan_text)
         if self.mode == 'track':
-            self._configure_tracking(values)
+            self._configure_tracking(values, configs.tracker)
+        else:
+            with self._state_lock:
+                self._early_prior = None          # only track mode takes initialpose
         self._configured_parts = True
         self.get_logger().info(f'configured: mode {self.mode}, base frame {self.base_frame}; '
-                               f'map: {self.source.map_state()[1]}')
+                               f'map: {self.source.map_state().detail}')
         return SUCCESS
 
     @transition('activate')
@@ -232,6 +282,7 @@ class GlobalLocalizerNode(LifecycleNode):
         self._stop.set()
         self._mailbox.wake()
         if self._configured_parts:
+            self.handover.stop()
             n = self._queue.cancel_all(f'not localized: global_localizer {why} while the call '
                                        'waited for a scan')
             if n:
@@ -249,8 +300,9 @@ class GlobalLocalizerNode(LifecycleNode):
             return
         self._configured_parts = False
         self._queue.stop(f'not localized: global_localizer {why}')
-        self.builder.stop()
+        self.source.stop()
         self._laser.close()
+        self.handover.close()
         self.destroy_subscription(self._map_sub)
         self.destroy_subscription(self._scan_sub)
         for sub in self._track_subs:
@@ -262,7 +314,7 @@ class GlobalLocalizerNode(LifecycleNode):
         with self._state_lock:
             self._last, self._index_marks = None, []
 
-    def _start_worker(self, target, name: str) -> None:
+    def _start_worker(self, target: Callable[[], None], name: str) -> None:
         worker = threading.Thread(target=target, name=name, daemon=True)
         self._workers.append(worker)
         worker.start()
@@ -274,8 +326,8 @@ class GlobalLocalizerNode(LifecycleNode):
         self._cleanup_parts('shutting down')
         super().destroy_node()
 
-    def _configure_tracking(self, values: dict[str, Any]) -> None:
-        """Track mode: the tracker session, ``odom`` and ``initialpose``, the TF broadcaster."""
+    def _configure_tracking(self, values: dict[str, Any], config: Any) -> None:
+        """Track mode: the tracker session, ``odom``, the TF broadcaster, a kept prior."""
         odom_frame = str(values['odom_frame']).lstrip('/')
         buffer = OdometryBuffer(float(values['odom_max_age']))
         odometry = OdometrySource(buffer, odom_frame, self.base_frame, self._laser.buffer)
@@ -283,21 +335,29 @@ class GlobalLocalizerNode(LifecycleNode):
                                                   float(values['transform_tolerance']))
         if broadcaster is None:
             self.get_logger().info('tf2_ros is not installed: map -> odom is not broadcast')
-        self.session = TrackSession(build_config(TrackerConfig, 'tracker', values,
-                                                 self.laser_pose),
-                                    odometry, broadcaster, self.get_logger().info)
+        self.session = TrackSession(config, odometry, broadcaster, self.get_logger().info)
         self._track_subs = [
             self.create_subscription(Odometry, 'odom', buffer.add, ODOM_QOS,
-                                     callback_group=self._group),
-            self.create_subscription(PoseWithCovarianceStamped, 'initialpose',
-                                     self._on_initialpose, 10, callback_group=self._group)]
+                                     callback_group=self._group)]
         if values['publish_initialpose']:
             self.get_logger().warning('publish_initialpose is ignored in track mode (the node '
                                       'takes initialpose as its prior)')
+        with self._state_lock:
+            early, self._early_prior = self._early_prior, None
+        if early is not None:
+            self._take_prior(early)
 
     def _on_initialpose(self, msg: PoseWithCovarianceStamped) -> None:
-        if self.session is None:
-            return
+        """Track mode: the prior. Before a track session exists it is kept for it."""
+        if self.session is not None:
+            self._take_prior(msg)
+        elif not self._configured_parts:
+            with self._state_lock:
+                self._early_prior = msg
+            self.get_logger().info('initialpose received before configure: kept as the prior '
+                                   'of track mode')
+
+    def _take_prior(self, msg: PoseWithCovarianceStamped) -> None:
         try:
             self.get_logger().info(self.session.prior_from_msg(msg,
                                                                self._frame(self.source.served)))
@@ -305,41 +365,14 @@ class GlobalLocalizerNode(LifecycleNode):
             self.get_logger().warning(f'initialpose ignored: {exc}')
 
     # ------------------------------------------------------------------ map and index
-    def _build(self, occ, progress):
-        return build_index(occ, self.index_config, progress=progress)
+    def _on_map(self, msg: OccupancyGrid) -> None:
+        occ = usable_map(msg, self.max_map_cells, self.get_logger())
+        if occ is not None:
+            self.source.on_map(occ)
 
-    def _make_served(self, index, source: str) -> ServedIndex:
-        sensor = tuple(getattr(index.config, 'sensor_pose', self.laser_pose))
-        if source != 'map topic' and any(abs(a - b) > 1e-6
-                                         for a, b in zip(sensor, self.laser_pose)):
-            self.get_logger().warning(f'{source} was built with the laser at {sensor} on the '
-                                      f'base, the laser_* parameters say {self.laser_pose}')
-        localizer = GlobalLocalizer(index, self.localizer_config)
-        return ServedIndex(index, localizer, index.map_checksum, source,
-                           getattr(index.map, 'frame_id', '') or '')
-
-    def _on_index_done(self, result, label: str) -> None:
-        self.source.on_done(result, label)
-
-    def _on_index_error(self, exc: BaseException, label: str) -> None:
-        self.source.on_error(exc, label)
-
-    def _frame(self, served: ServedIndex | None) -> str:
-        return self.map_frame_param or (served.frame if served else '') or 'map'
-
-    def _on_ready(self, served: ServedIndex) -> None:
+    def _on_served(self, served: ServedIndex) -> None:
+        """IndexSource: a new index (or frame) is served: its markers."""
         frame = self._frame(served)
-        how = 'loaded' if served.source != 'map topic' else 'indexed'
-        self.get_logger().info(f'{served.source}: {how}, ready, {len(served.index.node_xy)} '
-                               f'nodes (frame {frame})')
-        self._refresh_index_markers(served, frame)
-
-    def _on_frame(self, frame: str) -> None:
-        served = self.source.served
-        if served is not None:
-            self._refresh_index_markers(served, self._frame(served))
-
-    def _refresh_index_markers(self, served: ServedIndex, frame: str) -> None:
         stamp = self._now_ns()
         marks = markers.index_markers(served.index, frame, stamp, self.max_gvd_points)
         with self._state_lock:
@@ -347,36 +380,56 @@ class GlobalLocalizerNode(LifecycleNode):
         if self._active and self.get_parameter('publish_markers').value:
             self.marker_pub.publish(markers.marker_array(marks, frame, stamp))
 
-    def _on_map(self, msg: OccupancyGrid) -> None:
-        occ = usable_map(msg, self.max_map_cells, self.get_logger())
-        if occ is not None:
-            self.source.on_map(occ)
+    def _frame(self, served: ServedIndex | None) -> str:
+        return self.map_frame_param or (served.frame if served else '') or 'map'
 
-    def map_state(self) -> tuple[str, str]:
-        """``('no map' | 'indexing' | 'ready', detail)``; ``'no map'`` before configure."""
+    def map_state(self) -> MapState:
+        """Return the index source's state; ``WAITING`` (not configured) before configure."""
         if not self._configured_parts:
-            return 'no map', 'not configured'
+            return MapState(IndexPhase.WAITING, 'not configured')
         return self.source.map_state()
 
-    # ------------------------------------------------------------------ scans
+    # ------------------------------------------------------------------ one scan
     def _on_scan(self, msg: LaserScan) -> None:
         if self._active:
             self._mailbox.put(msg)
 
-    def _not_ready(self) -> str | None:
-        """Why nothing can be localized now, or None."""
+    def _check_ready(self) -> ServedIndex:
+        """Return the index served now; raise :class:`Refused` saying why nothing can be."""
         if not self._active:
             label = state_label(self)
             todo = {'unconfigured': 'configure and activate it', 'inactive': 'activate it',
                     'finalized': 'it has shut down'}.get(label, 'try again once it is active')
-            return (f'global_localizer is {label}, not active: {todo} (ros2 lifecycle set '
-                    f'{self.get_fully_qualified_name()} configure|activate)')
-        state, detail = self.source.map_state()
-        if state == 'indexing':
-            return f'indexing in progress ({detail}); try again shortly'
-        if state == 'no map':
-            return f'no map/index yet: {detail}'
-        return None
+            raise Refused(f'global_localizer is {label}, not active: {todo} (ros2 lifecycle set '
+                          f'{self.get_fully_qualified_name()} configure|activate)')
+        phase, detail = self.source.map_state()
+        if phase in (IndexPhase.LOADING, IndexPhase.INDEXING):
+            raise Refused(f'indexing in progress ({detail}); try again shortly')
+        served = self.source.served
+        if phase is IndexPhase.WAITING or served is None:
+            raise Refused(f'no map/index yet: {detail}')
+        return served
+
+    def _prepare(self, msg: LaserScan) -> Prepared:
+        """
+        Check that ``msg`` can be localized now and prepare it; raise :class:`Refused` if not.
+
+        The scan's arguments are mirrored for an upside-down laser.
+        """
+        served = self._check_ready()
+        args = scan_args_from_msg(msg)
+        problem = scan_problem(args)
+        if problem:
+            self.get_logger().warning(f'skipping scan: {problem}', throttle_duration_sec=2.0)
+            raise Refused(f'bad scan: {problem}')
+        mount = self._laser.mount(msg.header.frame_id)
+        if mount.mirrored:
+            args = ScanArgs(args.ranges, -args.angle_min, -args.angle_increment,
+                            args.range_min, args.range_max)
+        elif args.angle_increment < 0.0:
+            self.get_logger().warning('negative angle_increment: mirrored (upside-down) laser? '
+                                      'localizing the scan as given', once=True)
+        return Prepared(msg, args, mount, served, self._localizer_for(served, mount))
 
     def _localizer_for(self, served: ServedIndex, mount: LaserMount) -> GlobalLocalizer:
         pose = tuple(mount.pose)
@@ -388,89 +441,40 @@ class GlobalLocalizerNode(LifecycleNode):
                 variant = served.variants[pose] = served.localizer.with_laser_pose(pose)
         return variant
 
-    def _prepare(self, msg: LaserScan) -> tuple[ScanArgs, LaserMount] | str:
-        """
-        Return the scan's arguments and the laser mount, or why the scan is skipped.
-
-        The arguments are mirrored for an upside-down laser.
-        """
-        args = scan_args_from_msg(msg)
-        problem = scan_problem(args)
-        if problem:
-            self.get_logger().warning(f'skipping scan: {problem}', throttle_duration_sec=2.0)
-            return f'bad scan: {problem}'
-        mount = self._laser.mount(msg.header.frame_id)
-        if mount.mirrored:
-            args = ScanArgs(args.ranges, -args.angle_min, -args.angle_increment,
-                            args.range_min, args.range_max)
-        elif args.angle_increment < 0.0:
-            self.get_logger().warning('negative angle_increment: mirrored (upside-down) laser? '
-                                      'localizing the scan as given', once=True)
-        return args, mount
-
-    def _ready(self) -> ServedIndex | str:
-        """Return the index served now, or why nothing can be localized."""
-        reason = self._not_ready()
-        served = self.source.served
-        if reason is None and served is None:
-            reason = 'no map/index yet'
-        return reason or served
-
-    def _process(self, msg: LaserScan, served: ServedIndex, verbose: bool,
-                 run: Callable[[GlobalLocalizer, ScanArgs], Any],
-                 what: str = 'localization') -> tuple[Any, str | None]:
-        """
-        Localize (or track) one scan with ``served`` and publish.
-
-        ``run(localizer, args)`` returns the Localization (or TrackResult); it runs under the
-        localization lock. Returns ``(result | None, reason | None)``: the reason is None when
-        a pose was published.
-        """
-        prepared = self._prepare(msg)
-        if isinstance(prepared, str):
-            return None, prepared
-        args, mount = prepared
-        localizer = self._localizer_for(served, mount)
+    def _run(self, what: str, work: Callable[[], T]) -> T:
+        """Run the core under the localization lock; an exception becomes :class:`Refused`."""
         with self._localize_lock:
             try:
-                result = run(localizer, args)
+                return work()
             except Exception as exc:  # noqa: BLE001 - a bad scan must not kill the node
                 self.get_logger().warning(f'{what} error: {type(exc).__name__}: {exc}')
-                return None, f'{what} error: {exc}'
-        loc = result.as_localization() if isinstance(result, TrackResult) else result
-        if self._publish_result(loc, msg, args, mount, served, verbose):
-            return result, None
-        text = f'{loc.status}: {loc.message}'
-        if verbose:
-            self.get_logger().warning(f'no pose published: {text}')
-        return result, text
+                raise Refused(f'{what} error: {exc}') from exc
 
-    def _localize(self, msg: LaserScan, served: ServedIndex,
-                  verbose: bool) -> tuple[Any, str | None]:
-        """Localize one scan and publish; ``(Localization | None, reason | None)``."""
-        return self._process(msg, served, verbose,
-                             lambda localizer, args: localizer.localize_scan(*args.as_tuple()))
+    def _localize(self, msg: LaserScan, verbose: bool) -> Outcome:
+        """Localize one scan and publish (raises :class:`Refused` when it cannot be)."""
+        scan = self._prepare(msg)
+        loc = self._run('localization',
+                        lambda: scan.localizer.localize_scan(*scan.args.as_tuple()))
+        return self._publish(loc, scan, verbose)
 
-    def _track(self, msg: LaserScan, served: ServedIndex) -> None:
+    def _track(self, msg: LaserScan) -> None:
         """Track one scan (track mode) and publish."""
         session = self.session
         if session is None:
             return
+        scan = self._prepare(msg)
         publish_tf = bool(self.get_parameter('publish_tf').value)
-        result, _ = self._process(
-            msg, served, False,
-            lambda localizer, args: session.track(localizer, args, msg.header.stamp,
-                                                  self._frame(served), publish_tf),
-            'tracking')
-        if result is not None and result.mode != 'tracked':
+        result = self._run('tracking', lambda: session.track(
+            scan.localizer, scan.args, msg.header.stamp, self._frame(scan.served), publish_tf))
+        self._publish(result.as_localization(), scan, False)
+        if result.mode != 'tracked':
             self.get_logger().info(f'track: {result.mode}, {result.status}: {result.message}',
                                    throttle_duration_sec=1.0)
 
-    def _publish_result(self, loc, msg: LaserScan, args: ScanArgs, mount: LaserMount,
-                        served: ServedIndex, verbose: bool) -> bool:
-        """Publish the candidates, markers and an ``ok`` finite pose; True when a pose was."""
-        frame = self._frame(served)
-        stamp = msg.header.stamp
+    def _publish(self, loc: Localization, scan: Prepared, verbose: bool) -> Outcome:
+        """Publish the candidates, markers and an ``ok`` finite pose (handed over to AMCL)."""
+        frame = self._frame(scan.served)
+        stamp = scan.msg.header.stamp
         with self._state_lock:
             self._last = loc
             index_marks = self._index_marks
@@ -481,8 +485,8 @@ class GlobalLocalizerNode(LifecycleNode):
         if self.get_parameter('publish_markers').value and (
                 verbose or now - self._last_markers >= MARKER_PERIOD):
             self._last_markers = now
-            marks = markers.localization_markers(loc, frame, stamp, top_n, scan_points(args),
-                                                 mount.pose, served.index.node_xy)
+            marks = markers.localization_markers(loc, frame, stamp, top_n, scan_points(scan.args),
+                                                 scan.mount.pose, scan.served.index.node_xy)
             self.marker_pub.publish(markers.marker_array([*index_marks, *marks], frame, stamp))
         pose = loc.pose
         published = loc.ok and pose is not None and all(math.isfinite(v) for v in pose)
@@ -491,41 +495,51 @@ class GlobalLocalizerNode(LifecycleNode):
             out.header.stamp = stamp
             self.pose_pub.publish(out)
             if self.get_parameter('publish_initialpose').value and self.mode != 'track':
-                self.initialpose_pub.publish(out)
+                self.handover.start(out)
             log = self.get_logger().info if verbose else self.get_logger().debug
             log(f'{self.base_frame} in {frame}: {format_result(loc)}')
+        outcome = Outcome(loc, published)
         if verbose:
+            if not published:
+                self.get_logger().warning(f'no pose published: {outcome.reason}')
             self._publish_diagnostics()
-        return published
+        return outcome
 
     # ------------------------------------------------------------------ services
     def _serve(self, msg: LaserScan) -> Answer:
-        served = self._ready()
-        if isinstance(served, str):
-            return Answer(False, served)
-        loc, reason = self._localize(msg, served, verbose=True)
-        if reason is None and self.session is not None:
+        """RequestQueue: localize the scan the waiting calls asked for; their answer."""
+        try:
+            outcome = self._localize(msg, verbose=True)
+        except Refused as why:
+            return Answer(False, str(why))
+        if not outcome.published:
+            return Answer(False, outcome.reason)
+        loc = outcome.localization
+        if self.session is not None:
             self.session.set_prior(loc.pose, loc.covariance)    # the track goes on from there
-        return Answer(reason is None, format_result(loc) if reason is None else reason)
+        return Answer(True, format_result(loc))
 
     def _no_scan_text(self, timeout: float) -> str:
-        return f'no scan received on {self.resolve_topic_name("scan")} within {timeout:g} s'
+        return f'no scan received on {self._scan_topic()} within {timeout:g} s'
+
+    def _scan_topic(self) -> str:
+        return self.resolve_topic_name(str(self.get_parameter('scan_topic').value))
+
+    def _submit(self) -> tuple[Future, float]:
+        """Queue a call for the next scan: its Future and timeout; :class:`Refused` if not."""
+        self._check_ready()
+        timeout = float(self.get_parameter('scan_timeout').value)
+        return self._queue.submit(timeout), timeout
 
     def _localize_next_scan(self, service: str) -> Answer:
         """Wait (in this executor thread) for the answer of the next scan, or refuse."""
-        reason = self._not_ready()
-        if reason is None:
-            timeout = float(self.get_parameter('scan_timeout').value)
-            queued = self._queue.submit(timeout)
-            if isinstance(queued, str):
-                answer = Answer(False, queued)
-            else:
-                try:
-                    answer = queued.result(timeout=timeout + ANSWER_SLACK)
-                except FutureTimeout:
-                    answer = Answer(False, f'no answer within {timeout + ANSWER_SLACK:g} s')
-        else:
-            answer = Answer(False, reason)
+        try:
+            future, timeout = self._submit()
+            answer = future.result(timeout=timeout + ANSWER_SLACK)
+        except Refused as why:
+            answer = Answer(False, str(why))
+        except FutureTimeout:
+            answer = Answer(False, f'no answer within {timeout + ANSWER_SLACK:g} s')
         if not answer.ok:
             self.get_logger().warning(f'{service} failed: {answer.message}')
         return answer
@@ -539,23 +553,92 @@ class GlobalLocalizerNode(LifecycleNode):
         self._localize_next_scan('global_localization')
         return response
 
+    def _serve_nav2_service(self, serve: bool) -> None:
+        """Create or destroy ``reinitialize_global_localization`` (start-up and configure)."""
+        if serve and self._nav2_service is None:
+            self._nav2_service = create_withholding_service(
+                self, Empty, NAV2_SERVICE, self._on_reinitialize, qos_profile=SERVICE_QOS,
+                callback_group=self._group)
+        elif not serve and self._nav2_service is not None:
+            self.destroy_service(self._nav2_service)
+            self._nav2_service = None
+
+    def _on_reinitialize(self, request: Empty.Request,
+                         response: Empty.Response) -> Empty.Response | None:
+        """
+        nav2's ``reinitialize_global_localization``: start a search, answer at once.
+
+        Answered (within the behavior tree's ``server_timeout``) once the next scan is queued
+        for localization: the node is active, the index ready and a scan arrived within
+        ``scan_timeout``. The outcome is published (``global_pose`` and the hand-over on
+        ``initialpose`` when ``ok``; ``/diagnostics``; the log). When no search can start, the
+        call is not answered at all: the behavior tree times out and reads FAILURE.
+        """
+        try:
+            age = self._mailbox.age()
+            if self._active and (age is None or age > self.get_parameter('scan_timeout').value):
+                raise Refused(f'no scan on {self._scan_topic()} in the last '
+                              f'{self.get_parameter("scan_timeout").value:g} s')
+            future, _ = self._submit()
+        except Refused as why:
+            self.get_logger().warning(f'{NAV2_SERVICE}: not answered (the caller reads a '
+                                      f'failure): {why}')
+            return None
+        future.add_done_callback(self._log_reinitialized)
+        return response
+
+    def _log_reinitialized(self, future: Future) -> None:
+        answer = future.result()
+        if answer.ok:
+            self.get_logger().info(f'{NAV2_SERVICE}: localized, {answer.message}')
+        else:
+            self.get_logger().warning(f'{NAV2_SERVICE}: not localized: {answer.message}')
+
     # ------------------------------------------------------------------ loops
     def _continuous_loop(self) -> None:
         """Continuous mode: localize the newest scan, at most ``rate`` times a second."""
-        period = 1.0 / self.rate if self.rate > 0 else 0.0
-        for msg, served in self._ready_scans('not localizing: {reason}', period):
-            loc, reason = self._localize(msg, served, verbose=False)
-            if reason and loc is not None:
-                self.get_logger().info(f'no pose: {reason}', throttle_duration_sec=2.0)
+        def localize(msg: LaserScan) -> bool:
+            outcome = self._localize(msg, verbose=False)
+            if not outcome.published:
+                self.get_logger().info(f'no pose: {outcome.reason}', throttle_duration_sec=2.0)
+            return False
+        self._each_scan(localize, 'not localizing: {reason}',
+                        1.0 / self.rate if self.rate > 0 else 0.0)
 
-    def _ready_scans(self, waiting: str,
-                     period: float = 0.0) -> Iterator[tuple[LaserScan, ServedIndex]]:
+    def _track_loop(self) -> None:
+        """Track mode: track the newest scan, again and again."""
+        def track(msg: LaserScan) -> bool:
+            self._track(msg)
+            return False
+        self._each_scan(track, 'not tracking: {reason}')
+
+    def _startup_loop(self) -> None:
+        """``localize_on_start``: localize incoming scans until the first ``ok`` pose."""
+        self.get_logger().info('localize_on_start: localizing incoming scans until the first '
+                               'ok pose')
+
+        def localize(msg: LaserScan) -> bool:
+            outcome = self._localize(msg, verbose=False)
+            if outcome.published:
+                self.get_logger().info('localize_on_start: localized, '
+                                       f'{format_result(outcome.localization)}; on demand from '
+                                       'now on')
+                self._publish_diagnostics()
+            else:
+                self.get_logger().info(f'localize_on_start: {outcome.reason}; trying the next '
+                                       'scan', throttle_duration_sec=2.0)
+            return outcome.published
+        self._each_scan(localize, 'localize_on_start: waiting ({reason})')
+
+    def _each_scan(self, handle: Callable[[LaserScan], bool], waiting: str,
+                   period: float = 0.0) -> None:
         """
-        Yield the newest scan and the served index, again and again, when it can be localized.
+        Call ``handle(scan)`` with the newest scan, again and again (a mode's worker thread).
 
-        Until the node stops; while it cannot localize, ``waiting`` (with ``{reason}``) is
-        logged now and then. With a ``period`` (s), a scan is taken at most that often (timed
-        from when the last one was taken; the scans in between are dropped).
+        Until the node stops or ``handle`` returns True. A :class:`Refused` scan (not ready, bad
+        scan) is logged now and then as ``waiting`` (with ``{reason}``). With a ``period`` (s), a
+        scan is taken at most that often (timed from when the last one was taken; the scans in
+        between are dropped).
         """
         done = self._mailbox.seq
         next_t = 0.0
@@ -567,42 +650,23 @@ class GlobalLocalizerNode(LifecycleNode):
                 continue
             msg, done = got
             next_t = time.monotonic() + period
-            served = self._ready()
-            if isinstance(served, str):
-                self.get_logger().info(waiting.format(reason=served), throttle_duration_sec=5.0)
-                continue
-            yield msg, served
-
-    def _track_loop(self) -> None:
-        """Track mode: track the newest scan, again and again."""
-        for msg, served in self._ready_scans('not tracking: {reason}'):
-            self._track(msg, served)
-
-    def _startup_loop(self) -> None:
-        """``localize_on_start``: localize incoming scans until the first ``ok`` pose."""
-        self.get_logger().info('localize_on_start: localizing incoming scans until the first '
-                               'ok pose')
-        for msg, served in self._ready_scans('localize_on_start: waiting ({reason})'):
-            loc, reason = self._localize(msg, served, verbose=False)
-            if reason is None:
-                self.get_logger().info(f'localize_on_start: localized, {format_result(loc)}; '
-                                       'on demand from now on')
-                self._publish_diagnostics()
-                return
-            self.get_logger().info(f'localize_on_start: {reason}; trying the next scan',
-                                   throttle_duration_sec=2.0)
+            try:
+                if handle(msg):
+                    return
+            except Refused as why:
+                self.get_logger().info(waiting.format(reason=why), throttle_duration_sec=5.0)
 
     # ------------------------------------------------------------------ diagnostics
     def _publish_diagnostics(self) -> None:
         if not self._configured_parts:
             return
-        state, detail = self.source.map_state()
+        phase, detail = self.source.map_state()
         with self._state_lock:
             last = self._last
         served = self.source.served
-        status = localization_status(self.get_name(), self.get_fully_qualified_name(), state,
-                                     last, detail, self._frame(served), state_label(self),
-                                     self.mode)
+        status = localization_status(self.get_name(), self.get_fully_qualified_name(),
+                                     phase.reported, last, detail, self._frame(served),
+                                     state_label(self), self.mode)
         try:
             self.diagnostics_pub.publish(diagnostic_array([status], self._now_ns()))
         except Exception:  # noqa: BLE001 - a tick racing with cleanup: the publisher is gone

@@ -19,18 +19,16 @@ from typing import Any
 from nav_msgs.msg import OccupancyGrid
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from ssm_localization.config import IndexConfig
-from ssm_localization.mapping.index import build_index
+from ssm_localization.mapping.index import build_index, MapIndex
 from ssm_localization.ros import markers
 from ssm_localization.ros.executor import spin
-from ssm_localization.ros.index_builder import IndexBuilder
+from ssm_localization.ros.index_builder import BuildJob, IndexBuilder
 from ssm_localization.ros.index_source import map_label, write_index
 from ssm_localization.ros.lifecycle import (answer_invalid_transitions, configured_state,
                                             FAILURE, schedule_autostart, SUCCESS, transition)
 from ssm_localization.ros.maps import usable_map
 from ssm_localization.ros.parameter_guard import ParameterGuard
-from ssm_localization.ros.parameters import (build_config, config_problem, INDEXER_CONFIGS,
-                                             indexer_parameters, laser_pose_of)
+from ssm_localization.ros.parameters import config_problem, indexer_parameters, node_configs
 from ssm_localization.ros.qos import LATCHED_QOS
 from visualization_msgs.msg import MarkerArray
 
@@ -43,7 +41,7 @@ class MapIndexerNode(LifecycleNode):
         answer_invalid_transitions(self)
         self._guard = ParameterGuard(self, indexer_parameters(), (), {},
                                      partial(configured_state, self),
-                                     partial(config_problem, INDEXER_CONFIGS))
+                                     config_problem)
         values = self._guard.declare()
         self._group = ReentrantCallbackGroup()
         self._lock = threading.Lock()
@@ -62,7 +60,7 @@ class MapIndexerNode(LifecycleNode):
         if self._destroying:
             return FAILURE
         values = self._guard.values()
-        self.index_config = build_config(IndexConfig, 'index', values, laser_pose_of(values))
+        self.index_config = node_configs(values).index
         self.index_file = str(values['index_file'])
         self.max_map_cells = int(values['max_map_cells'])
         self.max_gvd_points = int(values['max_gvd_points'])
@@ -134,7 +132,7 @@ class MapIndexerNode(LifecycleNode):
         label = map_label(occ, checksum)
         self.get_logger().info(f'{label}: indexing')
         cfg = self.index_config
-        self.builder.submit(label, lambda progress: build_index(occ, cfg, progress=progress))
+        self.builder.submit(BuildJob(label, partial(build_index, occ, cfg)))
 
     def _publish(self, index) -> None:
         frame = getattr(index.map, 'frame_id', 'map') or 'map'
@@ -142,10 +140,10 @@ class MapIndexerNode(LifecycleNode):
         self.marker_pub.publish(markers.marker_array(
             markers.index_markers(index, frame, stamp, self.max_gvd_points), frame, stamp))
 
-    def _on_index(self, index, label: str) -> None:
+    def _on_index(self, job: BuildJob, index: MapIndex) -> None:
         with self._lock:
             self.index, self._checksum = index, index.map_checksum
-        self.get_logger().info(f'{label}: index ready, {len(index.node_xy)} nodes')
+        self.get_logger().info(f'{job.label}: index ready, {len(index.node_xy)} nodes')
         self._publish(index)
         self._save(index)
 
@@ -153,8 +151,8 @@ class MapIndexerNode(LifecycleNode):
         if self.index_file:
             write_index(index, Path(self.index_file).expanduser(), self.get_logger())
 
-    def _on_error(self, exc: BaseException, label: str) -> None:
-        self.get_logger().warning(f'{label}: indexing failed ({type(exc).__name__}: {exc}); '
+    def _on_error(self, job: BuildJob, exc: BaseException) -> None:
+        self.get_logger().warning(f'{job.label}: indexing failed ({type(exc).__name__}: {exc}); '
                                   'keeping the previous index')
 
     def destroy_node(self) -> None:

@@ -39,8 +39,11 @@ RANGES: dict[str, tuple[float, float]] = {
     'max_gvd_points': (0, INTEGER_MAX),
     'odom_max_age': (0.0, 60.0),
     'transform_tolerance': (0.0, 60.0),
+    'handover_period': (0.01, 60.0),
+    'handover_tries': (1, 100000),
+    'handover_tolerance': (0.0, 1000.0),
 }
-NON_EMPTY = ('base_frame', 'odom_frame')
+NON_EMPTY = ('base_frame', 'odom_frame', 'scan_topic', 'map_topic')
 
 
 def descriptor(name: str, default: Any, description: str, dynamic: bool,

@@ -2,12 +2,12 @@
 The newest scan, and service calls waiting for the next one (a bounded queue, one worker).
 
 A ``relocalize`` / ``global_localization`` call asks for the next scan received after the call.
-:meth:`RequestQueue.submit` gives the call a :class:`concurrent.futures.Future` to wait on, or a
-refusal at once when ``capacity`` calls are already waiting. One worker thread waits for a scan
-newer than the oldest waiting call, localizes it once and answers every call made before that
-scan with the same result, so a burst of calls costs one localization. A call that sees no scan
-within its ``scan_timeout`` is answered with that reason; :meth:`RequestQueue.cancel_all`
-answers every waiting call (deactivation).
+:meth:`RequestQueue.submit` gives the call a :class:`concurrent.futures.Future` to wait on, or
+raises :class:`Refused` at once when ``capacity`` calls are already waiting. One worker thread
+waits for a scan newer than the oldest waiting call, localizes it once and answers every call
+made before that scan with the same result, so a burst of calls costs one localization. A call
+that sees no scan within its ``scan_timeout`` is answered with that reason;
+:meth:`RequestQueue.cancel_all` answers every waiting call (deactivation).
 
 The service callbacks wait on their Future in an executor thread (rclpy Jazzy re-runs pending
 coroutine callbacks in a busy loop, so awaiting would spin a core while a call waits): the node's
@@ -32,6 +32,10 @@ ANSWER_GROUP = 8       # answers sent together
 GROUP_PAUSE = 0.02     # s between groups
 
 
+class Refused(Exception):
+    """A call or scan that cannot be served now; the message says why, for the caller."""
+
+
 @dataclass(frozen=True)
 class Answer:
     """What a service call gets back: ``ok`` with a message, or the reason why not."""
@@ -47,6 +51,7 @@ class ScanMailbox:
         self._cv = threading.Condition()
         self._msg: Any = None
         self._seq = 0
+        self._received = 0.0      # time.monotonic() of the stored scan
 
     @property
     def seq(self) -> int:
@@ -59,7 +64,13 @@ class ScanMailbox:
         with self._cv:
             self._msg = msg
             self._seq += 1
+            self._received = time.monotonic()
             self._cv.notify_all()
+
+    def age(self) -> float | None:
+        """Return the seconds since the stored scan arrived, or None without one."""
+        with self._cv:
+            return None if self._msg is None else time.monotonic() - self._received
 
     def clear(self) -> None:
         """Forget the stored scan (the sequence number keeps counting)."""
@@ -120,15 +131,19 @@ class RequestQueue:
         with self._cv:
             return len(self._calls)
 
-    def submit(self, timeout: float) -> Future | str:
-        """Queue a call that waits at most ``timeout`` s for a scan: its Future, or a refusal."""
+    def submit(self, timeout: float) -> Future:
+        """
+        Queue a call that waits at most ``timeout`` s for a scan; return its Future.
+
+        Raises :class:`Refused` when the queue is full or stopped.
+        """
         future = Future()
         with self._cv:
             if self._stop.is_set():
-                return 'not accepting calls: the node is shutting down'
+                raise Refused('not accepting calls: the node is shutting down')
             if len(self._calls) >= self.capacity:
-                return (f'busy: {self.capacity} calls are already waiting for a scan; '
-                        'try again shortly')
+                raise Refused(f'busy: {self.capacity} calls are already waiting for a scan; '
+                              'try again shortly')
             self._calls.append(_Call(self._mailbox.seq, time.monotonic() + timeout, timeout,
                                      future))
             self._cv.notify_all()

@@ -54,6 +54,8 @@ def test_colcon_build_installs_nodes_and_ament_index(tmp_path):
         for rel in LaunchFile(path).share_files():
             assert (share / rel).is_file(), f'{rel} (loaded by {path.name}) is not installed'
     assert (share / 'rviz' / 'ssm_localization.rviz').is_file()
+    examples = sorted(p.name for p in (REPO / 'config' / 'examples').glob('*.yaml'))
+    assert examples and all((share / 'config' / 'examples' / e).is_file() for e in examples)
     # the installed entry point resolves and runs (a bad parameter makes it exit at once)
     pytest.importorskip('rclpy', reason='rclpy is needed to run the installed node')
     site = next((prefix / 'lib').glob('python3*/site-packages'))

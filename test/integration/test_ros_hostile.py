@@ -218,7 +218,7 @@ def test_index_of_another_map_is_not_used_silently(ros, tmp_path, capfd):
     rig = Rig(ros, index_file=str(path))
     rig.map_pub.publish(occupancy_grid_from_map(right))
     assert rig.ready()
-    assert ros.wait_for(lambda: rig.node.map_state()[1] == 'map topic', 60)
+    assert ros.wait_for(lambda: rig.node.map_state().detail == 'map topic', 60)
     err = capfd.readouterr().err
     assert 'was built for another map' in err or 'is not the map' in err
     res = rig.relocalize(laser_scan_from_record(sim.scans[0]))
@@ -237,7 +237,7 @@ def test_frame_change_and_map_swap(ros):
     # the same map in another frame: no re-indexing, poses and candidates move to that frame
     rig.map_pub.publish(occupancy_grid_from_map(occ, frame_id='world'))
     assert rig.ros.wait_for(lambda: rig.node.source.served.frame == 'world', 10)
-    assert rig.node.map_state()[0] == 'ready'
+    assert rig.node.map_state().phase.reported == 'ready'
     assert rig.relocalize(laser_scan_from_record(sim.scans[1])).success
     assert rig.poses[-1].header.frame_id == 'world'
     assert rig.candidates[-1].header.frame_id == 'world'
@@ -247,8 +247,8 @@ def test_frame_change_and_map_swap(ros):
     rig.map_pub.publish(occupancy_grid_from_map(swapped))
     saw_indexing = False
     end = time.monotonic() + 60
-    while rig.node.map_state()[0] != 'ready' or not saw_indexing:
-        state = rig.node.map_state()[0]
+    while rig.node.map_state().phase.reported != 'ready' or not saw_indexing:
+        state = rig.node.map_state().phase.reported
         if state == 'indexing':
             saw_indexing = True
             res = rig.relocalize(None, 5)

@@ -50,7 +50,7 @@ class Localizer(LocalizerRig):
         return served.localizer if served is not None else None
 
     def busy(self) -> bool:
-        return self.node.map_state()[0] == 'indexing'
+        return self.node.map_state().phase.reported == 'indexing'
 
     def publish_map(self, occ_or_grid) -> None:
         grid = occ_or_grid if isinstance(occ_or_grid, OccupancyGrid) \
@@ -238,8 +238,8 @@ def test_localizer_service_bad_input_and_kidnapping(ros, capfd):
 
 def test_service_answers_while_indexing(ros, monkeypatch):
     """A relocalize call during indexing fails at once with 'indexing in progress'."""
-    from ssm_localization.ros import global_localizer
-    real_build = global_localizer.build_index
+    from ssm_localization.ros import index_source
+    real_build = index_source.build_index
 
     def slow_build(occ, config=None, progress=None):     # a big map, deterministically
         for i in range(20):
@@ -247,7 +247,7 @@ def test_service_answers_while_indexing(ros, monkeypatch):
             if progress is not None:
                 progress(i, 100, 'slow test build')
         return real_build(occ, config, progress)
-    monkeypatch.setattr(global_localizer, 'build_index', slow_build)
+    monkeypatch.setattr(index_source, 'build_index', slow_build)
     loc = Localizer(ros)
     loc.publish_map(synthetic_map(0))
     assert ros.wait_for(loc.busy, 10)

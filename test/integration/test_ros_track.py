@@ -66,8 +66,8 @@ class TrackingNode:
 
     def ready(self, grid: OccupancyGrid, timeout: float = 120.0) -> bool:
         self.map_pub.publish(grid)
-        return bool(self.ros.wait_for(lambda: self.node.map_state()[0] == 'ready', timeout,
-                                      0.05))
+        return bool(self.ros.wait_for(
+            lambda: self.node.map_state().phase.reported == 'ready', timeout, 0.05))
 
     def step(self, scan: LaserScan, odom: Odometry | None, timeout: float = 30.0) -> None:
         """Publish the odometry (until the node has it), then the scan until it was tracked."""

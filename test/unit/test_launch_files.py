@@ -28,7 +28,11 @@ RVIZ = REPO / 'rviz' / 'ssm_localization.rviz'
 NAMES = yaml.safe_load((REPO / 'test' / 'data' / 'ros_jazzy_names.yaml').read_text())
 AUTOMATIC_PARAMETERS = {'use_sim_time'}      # declared by every rclpy / rclcpp node
 GLOBAL_LOCALIZER_ARGS = {'params_file', 'namespace', 'use_sim_time', 'autostart', 'index_file',
-                         'localize_on_start'}
+                         'localize_on_start', 'use_respawn', 'log_level'}
+# the arguments of nav2_bringup's launch/localization_launch.py (navigation2, jazzy branch,
+# f4108e5b1c2bce804a1aa0c7be6673a8eb4a1501): nav2_localization.launch.py takes each of them
+NAV2_LOCALIZATION_ARGS = {'namespace', 'map', 'use_sim_time', 'autostart', 'params_file',
+                          'use_composition', 'container_name', 'use_respawn', 'log_level'}
 NODE_ACTIONS = ('Node', 'LifecycleNode')
 
 
@@ -240,12 +244,12 @@ def test_launch_arguments_are_declared_and_used(launch_file):
     used = launch_file.used_arguments()
     assert used <= set(declared), f'used but not declared: {sorted(used - set(declared))}'
     assert set(declared) <= used, f'declared but never read: {sorted(set(declared) - used)}'
-    assert GLOBAL_LOCALIZER_ARGS <= set(declared)
+    assert GLOBAL_LOCALIZER_ARGS - {'params_file'} <= set(declared)
+    assert all(declared[a] for a in declared), 'every argument has a default'
     if launch_file.path.name == 'global_localizer.launch.py':
         assert set(declared) == GLOBAL_LOCALIZER_ARGS
-        assert all(declared[a] for a in declared), 'every argument has a default'
     else:
-        assert declared['map'] is None, 'map is required (no default)'
+        assert NAV2_LOCALIZATION_ARGS <= set(declared), 'a drop-in for localization_launch.py'
 
 
 def test_launched_packages_executables_and_parameters_exist(launch_file):
@@ -318,9 +322,9 @@ def test_nav2_params_file_names_existing_nav2_parameters():
 # ---------------------------------------------------------------------------- RViz
 
 EXPECTED_QOS = {   # topic -> (durability, reliability) the publishers offer
-    '/map': ('Transient Local', 'Reliable'),             # nav2 map_server
-    '/amcl_pose': ('Transient Local', 'Reliable'),       # nav2 amcl
-    '/scan': ('Volatile', 'Best Effort'),                # sensor data
+    'map': ('Transient Local', 'Reliable'),              # nav2 map_server
+    'amcl_pose': ('Transient Local', 'Reliable'),        # nav2 amcl
+    'scan': ('Volatile', 'Best Effort'),                 # sensor data
 }
 
 
@@ -349,12 +353,35 @@ def test_rviz_config_uses_known_classes_and_the_map_frame():
 def test_rviz_config_shows_our_topics_with_matching_qos():
     doc = yaml.safe_load(RVIZ.read_text())
     topics = {d['Topic']['Value']: d for d in _displays(doc) if 'Topic' in d}
-    for topic in ('/map', '/global_pose', '/candidates', '/topological_map'):
+    for topic in ('map', 'global_pose', 'candidates', 'topological_map'):
         assert topic in topics, f'{topic} is not shown'
-    latched = ('/global_pose', '/candidates', '/topological_map')
+    # relative names: rviz2 --ros-args -r __ns:=/robot1 shows robot1's topics
+    assert not [t for t in topics if t.startswith('/')], 'absolute topic names'
+    latched = ('global_pose', 'candidates', 'topological_map')
     expected = {**EXPECTED_QOS, **{t: ('Transient Local', 'Reliable') for t in latched}}
     for topic, (durability, reliability) in expected.items():
         if topic in topics:
             qos = topics[topic]['Topic']
             assert qos['Durability Policy'] == durability, topic
             assert qos['Reliability Policy'] == reliability, topic
+
+
+def test_nodes_follow_nav2_bringup_conventions(launch_file):
+    """
+    Namespace pushed once, use_sim_time left to SetParameter, respawn and log level.
+
+    A node given ``namespace=namespace`` ends up in ``/robot1/robot1`` under nav2_bringup's
+    ``PushROSNamespace``; a ``use_sim_time`` in a node's parameters overrides a parent's
+    ``SetParameter``.
+    """
+    for node in launch_file.nodes():
+        assert 'use_sim_time' not in node.parameters, f'{node.name}: use SetParameter'
+    for _, call in [*launch_file._calls('Node'), *launch_file._calls('LifecycleNode')]:
+        kw = {k.arg: k.value for k in call.keywords}
+        name = _value(kw['name'], launch_file.constants)
+        namespace = kw.get('namespace')
+        assert not (isinstance(namespace, ast.Name) and namespace.id == 'namespace'), \
+            f'{name}: namespace through node_namespace()'
+        assert 'arguments' in kw, f'{name}: --log-level'
+        if _value(kw['executable'], launch_file.constants) != 'lifecycle_manager':
+            assert 'respawn' in kw, f'{name}: use_respawn'

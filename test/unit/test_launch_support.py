@@ -8,8 +8,9 @@ from __future__ import annotations
 
 from helpers import RCLPY_SKIP_REASON
 import pytest
-from ssm_localization.ros.launch_support import (launch_bool, namespace_tokens,
-                                                 namespaced_params_file, nest_under_namespace)
+from ssm_localization.ros.launch_support import (amcl_equivalents, full_namespace, launch_bool,
+                                                 namespace_tokens, namespaced_params_file,
+                                                 nest_under_namespace, node_namespace)
 import yaml
 
 
@@ -37,6 +38,40 @@ def test_nest_under_namespace_keeps_absolute_keys():
     nested = nest_under_namespace(data, '/a/b')
     assert nested['a']['b']['global_localizer'] == data['global_localizer']
     assert nested['/**'] == data['/**']
+
+
+@pytest.mark.parametrize('pushed, namespace, own, full', [
+    (None, '', None, '/'),
+    (None, 'robot1', 'robot1', '/robot1'),
+    ('/robot1', 'robot1', None, '/robot1'),          # nav2_bringup: pushed and passed
+    ('/robot1', '', None, '/robot1'),                # pushed only
+    ('/fleet/robot1', '/robot1/', None, '/fleet/robot1'),
+    ('/fleet', 'robot1', 'robot1', '/fleet/robot1'),
+])
+def test_the_namespace_is_pushed_once(pushed, namespace, own, full):
+    assert node_namespace(pushed, namespace) == own
+    assert full_namespace(pushed, namespace) == full
+
+
+def test_a_file_nested_under_the_namespace_already_is_kept():
+    data = {'robot1': {'global_localizer': {'ros__parameters': {'mode': 'continuous'}}}}
+    assert nest_under_namespace(data, '/robot1') is data
+
+
+def test_amcl_equivalents_follow_amcl_unless_global_localizer_says_otherwise(tmp_path):
+    p = tmp_path / 'nav2.yaml'
+    p.write_text(yaml.safe_dump({
+        'amcl': {'ros__parameters': {'base_frame_id': 'base_footprint', 'global_frame_id': 'map',
+                                     'scan_topic': 'front/scan', 'max_particles': 2000}},
+        'global_localizer': {'ros__parameters': {'map_frame': 'world'}}}))
+    assert amcl_equivalents(p) == {'base_frame': 'base_footprint', 'scan_topic': 'front/scan'}
+    nested = tmp_path / 'nested.yaml'
+    nested.write_text(yaml.safe_dump({'robot1': {'amcl': {'ros__parameters': {
+        'odom_frame_id': 'robot1/odom'}}}}))
+    assert amcl_equivalents(nested, '/robot1') == {'odom_frame': 'robot1/odom'}
+    assert amcl_equivalents(nested) == {}
+    with pytest.raises(ValueError, match='not found'):
+        amcl_equivalents(tmp_path / 'missing.yaml')
 
 
 def test_namespaced_params_file_errors_name_the_file(tmp_path):

@@ -124,15 +124,33 @@ def test_load_configs_ros_params_file(tmp_path):
 
 def test_load_configs_dotted_keys_and_laser_pose(tmp_path):
     p = _write(tmp_path, 'global_localizer:\n  ros__parameters:\n'
-                         '    localizer.top_n: 2\n    localizer.laser_pose: [9.0, 9.0, 9.0]\n'
+                         '    localizer.top_n: 2\n'
                          '    index.beams: 120\n    index.topology.merge_radius: 0.7\n'
                          '    laser_x: 0.2\n    laser_yaw: 3.1\n')
     index_cfg, loc_cfg = load_configs(p)
     assert loc_cfg.top_n == 2
     assert index_cfg.beams == 120 and index_cfg.topology.merge_radius == 0.7
-    # laser_x/y/yaw feed both configs (and win over localizer.laser_pose)
+    # one laser pose: laser_x/y/yaw feed both configs
     assert loc_cfg.laser_pose == (0.2, 0.0, 3.1)
     assert index_cfg.sensor_pose == (0.2, 0.0, 3.1)
+
+
+@pytest.mark.parametrize('key', ['localizer.laser_pose', 'index.sensor_pose'])
+def test_the_laser_pose_is_set_once_with_the_laser_parameters(tmp_path, key):
+    p = _write(tmp_path, f'global_localizer:\n  ros__parameters:\n    {key}: [9.0, 9.0, 9.0]\n')
+    with pytest.raises(ValueError, match=f'{key}: the laser pose on the robot base is set '
+                                         'once, with laser_x, laser_y and laser_yaw'):
+        load_configs(p)
+
+
+def test_configs_from_params_is_the_path_of_files_and_nodes(tmp_path):
+    """A params file and the same values as ROS parameters (dotted) give the same configs."""
+    from ssm_localization.config.params import configs_from_params
+    values = {'index.beams': 90, 'localizer.top_n': 3, 'tracker.max_misses': 4,
+              'laser_x': 0.1, 'mode': 'continuous'}
+    p = _write(tmp_path, yaml.safe_dump({'global_localizer': {'ros__parameters': values}}))
+    assert configs_from_params(values) == load_all_configs(p)
+    assert load_all_configs(p).index.sensor_pose == (0.1, 0.0, 0.0)
 
 
 def test_load_all_configs_reads_the_file_once(tmp_path, monkeypatch):

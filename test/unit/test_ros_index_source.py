@@ -6,14 +6,16 @@ the same rules over DDS with real indexes).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 import threading
 import time
 
 import pytest
-from ssm_localization.ros.index_builder import IndexBuilder
-from ssm_localization.ros.index_source import FILE, IndexSource, ServedIndex
+from ssm_localization.config import IndexConfig, LocalizerConfig
+from ssm_localization.ros.index_builder import BuildJob
+from ssm_localization.ros.index_source import (FILE, IndexPhase, IndexSource, IndexWork,
+                                               MapState, parameter_differences, ServedIndex)
 
 
 @dataclass
@@ -45,8 +47,45 @@ class Log:
         return [t for level, t in self.lines if level == 'warning']
 
 
+class FakeWork(IndexWork):
+    """IndexWork whose 'index' is the FakeMap it was built from; files hold a map name."""
+
+    def __init__(self, harness):
+        super().__init__(IndexConfig(), LocalizerConfig())
+        object.__setattr__(self, 'harness', harness)
+
+    def load(self, path):
+        self.harness.release.wait(5)
+        text = path.read_text()
+        if text == 'corrupt':
+            raise ValueError(f'{path}: not a readable index file (bad zip)')
+        return FakeIndex(FakeMap(text, 'file_frame'))
+
+    def build(self, occ, progress):
+        self.harness.built.append(occ.cells)
+        return FakeIndex(occ)
+
+    def save(self, index, path):
+        path.write_text(index.map.cells)
+        self.harness.saved.append(index.map.cells)
+
+    def localizer(self, index):
+        return f'localizer({index.map.cells})'
+
+
+@dataclass
+class FakeIndex:
+    map: FakeMap  # noqa: A003 - MapIndex's field name
+    config: IndexConfig = IndexConfig()
+    node_xy: tuple = ((0.0, 0.0),)
+
+    @property
+    def map_checksum(self) -> str:
+        return self.map.checksum()
+
+
 class Harness:
-    """An IndexSource whose 'index' is the FakeMap it was built from; files hold a map name."""
+    """An IndexSource over FakeWork and the real IndexBuilder thread."""
 
     def __init__(self, tmp_path: Path, file_content: str | None = None, block_load=False):
         self.path = tmp_path / 'index.npz'
@@ -54,51 +93,19 @@ class Harness:
             self.path.write_text(file_content)
         self.log = Log()
         self.ready: list[ServedIndex] = []
-        self.frames: list[str] = []
         self.saved: list[str] = []
         self.built: list[str] = []
         self.release = threading.Event()
         if not block_load:
             self.release.set()
-        self.done = threading.Condition()
-        self.builder = IndexBuilder(self.log, self._on_done, self._on_error)
-        self.source = IndexSource(self.builder, self.log, self.path, '/map', self._load,
-                                  self._build, self._make, self._save, self._ready,
-                                  self.frames.append)
-
-    def _on_done(self, result, label):
-        self.source.on_done(result, label)
-
-    def _on_error(self, exc, label):
-        self.source.on_error(exc, label)
-
-    def _load(self, path):
-        self.release.wait(5)
-        text = path.read_text()
-        if text == 'corrupt':
-            raise ValueError(f'{path}: not a readable index file (bad zip)')
-        return FakeMap(text, 'file_frame')
-
-    def _build(self, occ, progress):
-        self.built.append(occ.cells)
-        return occ
-
-    def _make(self, index, source):
-        return ServedIndex(index, f'localizer({index.cells})', index.checksum(), source,
-                           index.frame_id)
-
-    def _save(self, index, path):
-        path.write_text(index.cells)
-        self.saved.append(index.cells)
-
-    def _ready(self, served):
-        self.ready.append(served)
+        self.work = FakeWork(self)
+        self.source = IndexSource(self.work, self.log, self.path, '/map', self.ready.append)
 
     def settle(self):
-        assert self.builder.wait_idle(5.0)
+        assert self.source.wait_idle(5.0)
 
     def close(self):
-        self.builder.stop()
+        self.source.stop()
 
 
 @pytest.fixture
@@ -117,13 +124,13 @@ def harness_factory(tmp_path):
 def test_good_file_then_matching_map_keeps_the_file_and_takes_the_topic_frame(harness_factory):
     h = harness_factory('A', block_load=True)
     h.source.start()
-    assert h.source.map_state()[0] == 'indexing'
+    assert h.source.map_state().phase is IndexPhase.LOADING
     h.source.on_map(FakeMap('A', 'world'))           # arrives while the file loads
     h.release.set()
     h.settle()
     assert [s.checksum[:1] for s in h.ready] == ['A'] and h.built == []
     assert h.ready[0].source.startswith(FILE) and h.ready[0].frame == 'world'
-    assert h.source.map_state() == ('ready', h.ready[0].source)
+    assert h.source.map_state() == MapState(IndexPhase.READY, h.ready[0].source)
     assert not h.log.warnings() and h.saved == []
 
 
@@ -155,7 +162,7 @@ def test_corrupt_file_falls_back_to_the_map_topic(harness_factory):
     h = harness_factory('corrupt')
     h.source.start()
     h.settle()
-    assert h.ready == [] and h.source.map_state()[0] == 'no map'
+    assert h.ready == [] and h.source.map_state().phase is IndexPhase.WAITING
     warning, = h.log.warnings()
     assert 'cannot use index file' in warning and 'bad zip' in warning
     assert 'falling back to the map on /map' in warning
@@ -188,11 +195,11 @@ def test_same_map_again_and_frame_change(harness_factory):
     h.settle()
     h.source.on_map(FakeMap('G', 'map'))
     h.settle()
-    assert h.built == ['G'] and h.frames == []
+    assert h.built == ['G'] and len(h.ready) == 1
     h.source.on_map(FakeMap('G', 'map2'))
     h.settle()
-    assert h.built == ['G'] and h.frames == ['map2']
-    assert h.source.served.frame == 'map2'
+    assert h.built == ['G'] and [s.frame for s in h.ready] == ['map', 'map2']
+    assert h.source.served.frame == 'map2' and h.source.served.index is h.ready[0].index
     assert any("moved from frame 'map' to 'map2'" in w for w in h.log.warnings())
 
 
@@ -201,7 +208,7 @@ def test_no_index_file_no_map(harness_factory, tmp_path):
     h.source._path = None
     h.source.start()
     assert h.log.lines == []
-    assert h.source.map_state() == ('no map', 'waiting for a map on /map')
+    assert h.source.map_state() == MapState(IndexPhase.WAITING, 'waiting for a map on /map')
 
 
 def test_a_map_job_dropped_by_the_builder_is_not_taken_for_pending(harness_factory):
@@ -211,13 +218,34 @@ def test_a_map_job_dropped_by_the_builder_is_not_taken_for_pending(harness_facto
     IndexBuilder: the newest job wins; 'being indexed' would be a lie then.
     """
     h = harness_factory('corrupt', block_load=True)
-    h.builder.submit('slow', lambda progress: (h.release.wait(5), ('map', FakeMap('Z')))[1])
+    builder = h.source._builder
+    builder.submit(BuildJob('slow', lambda progress: h.release.wait(5)))
     end = time.monotonic() + 5
-    while h.builder.status() != 'slow' and time.monotonic() < end:
+    while builder.status() != 'slow' and time.monotonic() < end:
         time.sleep(0.01)
-    assert h.builder.status() == 'slow'
+    assert builder.status() == 'slow'
     h.source.on_map(FakeMap('H'))            # queued behind 'slow', then replaced below
     h.source.start()                         # the file job replaces the queued map job
     h.release.set()
     h.settle()
     assert h.ready and h.ready[-1].checksum[:1] == 'H', [s.checksum for s in h.ready]
+
+
+def test_index_parameters_differing_from_the_file_are_named(harness_factory):
+    """``index.*`` parameters cannot change a loaded index file: a warning says which."""
+    h = harness_factory('A')
+    configured = IndexConfig(matcher=replace(IndexConfig().matcher, max_points=77), beams=180)
+    object.__setattr__(h.work, 'index_config', configured)
+    h.source.start()
+    h.settle()
+    assert h.ready and h.ready[-1].from_file
+    warning, = h.log.warnings()
+    assert 'index.matcher.max_points=' in warning and '(parameter: 77)' in warning
+    assert 'index.beams=360 (parameter: 180)' in warning and "file's values are used" in warning
+
+
+def test_parameter_differences_names_the_laser_pose_by_its_parameters():
+    assert parameter_differences(IndexConfig(), IndexConfig()) == []
+    moved = IndexConfig(sensor_pose=(0.2, 0.0, 0.0))
+    assert parameter_differences(IndexConfig(), moved) == [
+        'laser_x/laser_y/laser_yaw=[0.0, 0.0, 0.0] (parameter: [0.2, 0.0, 0.0])']

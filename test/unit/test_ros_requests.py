@@ -9,7 +9,7 @@ import threading
 import time
 
 import pytest
-from ssm_localization.ros.requests import Answer, RequestQueue, ScanMailbox
+from ssm_localization.ros.requests import Answer, Refused, RequestQueue, ScanMailbox
 
 
 def _wait(futures, timeout=5.0):
@@ -51,11 +51,12 @@ def test_a_burst_is_answered_by_one_localization_of_the_next_scan():
 
 def test_full_queue_refuses_at_once_with_a_reason():
     s = Server(capacity=3)
-    futures = [s.queue.submit(5.0) for _ in range(5)]
-    refused = [f for f in futures if isinstance(f, str)]
-    assert len(refused) == 2 and all(r.startswith('busy: 3 calls') for r in refused)
+    futures = [s.queue.submit(5.0) for _ in range(3)]
+    for _ in range(2):
+        with pytest.raises(Refused, match='^busy: 3 calls'):
+            s.queue.submit(5.0)
     s.mailbox.put('scan')
-    assert all(a.ok for a in _wait([f for f in futures if not isinstance(f, str)]))
+    assert all(a.ok for a in _wait(futures))
     s.queue.stop('bye')
 
 
@@ -97,7 +98,8 @@ def test_errors_and_cancellation_still_answer_every_call():
     late = s.queue.submit(30.0)
     s.queue.stop('shutting down')
     assert _wait([late])[0].message == 'shutting down'
-    assert 'shutting down' in s.queue.submit(1.0)
+    with pytest.raises(Refused, match='shutting down'):
+        s.queue.submit(1.0)
 
 
 def test_capacity_must_be_positive():
