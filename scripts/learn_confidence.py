@@ -12,9 +12,14 @@ the TurtleBot3 maps are the validation split, never looked at here:
   at 3.5 m and at 120 deg; never right.
 Every answer comes from the localizer with ``min_confidence`` 0, so that its status says whether
 the rules alone accept the pose. The model is fitted on the answers the rules accept (those are
-the ones it decides); an answer the rules refuse reports the rate at which such answers were
-right here, by reason. Prints the fit, a table of thresholds (precision of the own answers, ``ok``
-rate of the foreign ones) and the reliability of the fitted probabilities; writes
+the ones it decides): a logistic regression of the evidence, then an isotonic map of its score to
+a probability, fitted on scores cross-fitted by building (each building scored by a regression
+that did not see it). Foreign answers are weighted to make up ``--foreign-share`` of all answers
+(28 %: the share in ``bench localize --sensors ... --foreign``'s protocol), so the probabilities
+are calibrated for that mix. An answer the rules refuse reports the rate at which such answers
+were right here (same weights), by reason. Prints the fit, a table of thresholds (precision of
+the own answers, ``ok`` rate of the foreign ones) and the reliability of the fitted
+probabilities; writes
 ``config/confidence_model.yaml``. Copy the printed model into
 ``ssm_localization/config/confidence.py:CONFIDENCE_MODEL`` (a test checks the two agree) and pick
 ``LocalizerConfig.min_confidence`` from the table.
@@ -127,6 +132,8 @@ def main(argv=None) -> int:
     ap.add_argument('--sim', type=int, default=150, help='own scans per simulated map')
     ap.add_argument('--foreign', type=int, default=40, help='scans per ordered foreign pair')
     ap.add_argument('--l2', type=float, default=10.0)
+    ap.add_argument('--foreign-share', type=float, default=0.28,
+                    help='weight of the foreign answers as a share of all answers')
     ap.add_argument('--seed', type=int, default=0)
     ap.add_argument('--out', type=Path, default=ROOT / 'config' / 'confidence_model.yaml')
     ap.add_argument('--cache', type=Path, default=Path('bench_data') / 'confidence_answers.json',
@@ -134,20 +141,28 @@ def main(argv=None) -> int:
     ap.add_argument('--fresh', action='store_true', help='localize again even if cached')
     args = ap.parse_args(argv)
     answers = collect(args)
+    n_foreign = sum(not a.own for a in answers)
+    w_foreign = args.foreign_share / (1.0 - args.foreign_share) * \
+        (len(answers) - n_foreign) / max(n_foreign, 1)
+    weight = {id(a): 1.0 if a.own else w_foreign for a in answers}
+    print(f'{len(answers)} answers, {n_foreign} foreign (weight {w_foreign:.3f} each)')
     with_pose = [a for a in answers if a.values is not None]
     accepted = [a for a in with_pose if a.ok]
     refused: dict[str, float] = {}
     for reason in ('implausible', 'rival', 'degenerate'):
         these = [a for a in with_pose if not a.ok and refusal(a) == reason]
-        refused[reason] = round(sum(a.right for a in these) / len(these), 4) if these else 0.0
+        total = sum(weight[id(a)] for a in these)
+        refused[reason] = round(sum(weight[id(a)] * a.right for a in these) / total, 4) \
+            if these else 0.0
         print(f'refused ({reason}): {len(these)} answers, right {refused[reason]:.3f}')
     values = [a.values for a in accepted]
     labels = [a.right for a in accepted]
-    model = fit_confidence(values, labels, FEATURES, l2=args.l2, refused=refused,
-                           split='calibration: ' + ', '.join(CALIBRATION))
+    model = fit_confidence(values, labels, FEATURES, groups=[a.map for a in accepted],
+                           l2=args.l2, weight=[weight[id(a)] for a in accepted],
+                           refused=refused, split='calibration: ' + ', '.join(CALIBRATION))
     p = np.array([model.probability(v) for v in values])
     print(f'{len(accepted)} answers the rules accept ({sum(labels)} right); weights on '
-          f'standardised features:')
+          f'standardised features (isotonic map: {len(model.calibration)} knots):')
     for name, w in zip(model.features, model.weights):
         print(f'  {name:18s} {w:+.3f}')
     real_own = np.array([a.own and a.map in REAL_PLACES for a in accepted])
@@ -175,6 +190,8 @@ def main(argv=None) -> int:
         print(f'  own full scans right and ok at {t}: ' + ', '.join(per))
     print('reliability of the fitted probabilities (answers the rules accept):')
     print(format_reliability(reliability(p, labels)))
+    print('(in-sample; bench localize --foreign --reliability measures it on the validation '
+          'split)')
     doc = {'fitted_by': 'scripts/learn_confidence.py',
            'date': datetime.date.today().isoformat(),
            'answers': len(accepted), 'right': int(sum(labels)),

@@ -1,11 +1,13 @@
 """
-The calibrated confidence model: ``P(right | evidence)`` by logistic regression.
+The calibrated confidence model: ``P(right | evidence)``.
 
-``scripts/learn_confidence.py`` fits it on labelled answers of the calibration split (right
-poses, wrong places in the same building, scans of other buildings) and writes
-``config/confidence_model.yaml``; :data:`CONFIDENCE_MODEL` is copied from that file (a test
-checks they agree). The paper itself learns its pairwise potentials by logistic regression
-(section II.B); here the same tool weighs the evidence of a whole answer.
+A logistic regression weighs the evidence of an answer into one score (its log-odds); an
+isotonic (monotone, piecewise-linear) map, fitted on scores of buildings the regression did not
+see, turns the score into a probability. ``scripts/learn_confidence.py`` fits both on labelled
+answers of the calibration split (right poses, wrong places in the same building, scans of other
+buildings) and writes ``config/confidence_model.yaml``; :data:`CONFIDENCE_MODEL` is copied from
+that file (a test checks they agree). The paper itself learns its pairwise potentials by
+logistic regression (section II.B); here the same tool weighs the evidence of a whole answer.
 """
 from __future__ import annotations
 
@@ -22,7 +24,10 @@ class ConfidenceModel:
     ``P(right) = 1 / (1 + exp(-(intercept + sum_k w_k (f_k - mean_k) / scale_k)))``.
 
     ``features`` name the inputs (see ``localization/confidence.py`` for how each is made from
-    the evidence of an answer); ``split`` names the data it was fitted on.
+    the evidence of an answer); ``calibration`` the isotonic map from that log-odds to the
+    probability, as ``(log-odds, probability)`` knots in increasing order, interpolated linearly
+    and held constant beyond the ends (empty: the logistic probability itself); ``split`` names
+    the data it was fitted on.
     """
 
     features: tuple[str, ...]
@@ -35,6 +40,7 @@ class ConfidenceModel:
     #: about as well; ``degenerate``: the position is undetermined along some direction), the
     #: rate at which such answers were right on the calibration split
     refused: dict[str, float] = field(default_factory=lambda: dict(REFUSED_REASONS))
+    calibration: tuple[tuple[float, float], ...] = ()
     split: str = ''
 
     def __post_init__(self) -> None:
@@ -46,7 +52,14 @@ class ConfidenceModel:
         if not (len(self.mean) == len(self.scale) == len(self.weights) == n):
             raise ValueError(f'ConfidenceModel: {n} features but {len(self.mean)} means, '
                              f'{len(self.scale)} scales and {len(self.weights)} weights')
-        values = (*self.mean, *self.scale, *self.weights, self.intercept)
+        knots = [v for k in self.calibration for v in k]
+        pairs = list(zip(self.calibration, self.calibration[1:]))
+        if (any(len(k) != 2 for k in self.calibration)
+                or not all(0.0 <= p <= 1.0 for _, p in self.calibration)
+                or any(a[0] > b[0] or a[1] > b[1] for a, b in pairs)):
+            raise ValueError('ConfidenceModel.calibration: (log-odds, probability) knots, both '
+                             'increasing, probabilities in [0, 1]')
+        values = (*self.mean, *self.scale, *self.weights, self.intercept, *knots)
         if not all(math.isfinite(v) for v in values) or min(self.scale, default=1.0) <= 0.0:
             raise ValueError('ConfidenceModel: means, weights and the intercept must be finite '
                              'and scales > 0')
@@ -60,8 +73,19 @@ class ConfidenceModel:
 
     def probability(self, values: dict[str, float]) -> float:
         """Return ``P(right | evidence)`` for the feature ``values`` by name."""
-        z = self.logit(values)
-        return 1.0 / (1.0 + math.exp(-z)) if z >= -700.0 else 0.0
+        return self.calibrated(self.logit(values))
+
+    def calibrated(self, z: float) -> float:
+        """Return the probability of the log-odds ``z``: the isotonic map, else the logistic."""
+        knots = self.calibration
+        if not knots:
+            return 1.0 / (1.0 + math.exp(-z)) if z >= -700.0 else 0.0
+        if z <= knots[0][0]:
+            return knots[0][1]
+        for (z0, p0), (z1, p1) in zip(knots, knots[1:]):
+            if z <= z1:
+                return p0 + (p1 - p0) * (z - z0) / (z1 - z0) if z1 > z0 else p1
+        return knots[-1][1]
 
 
 #: fitted by ``scripts/learn_confidence.py`` on the calibration split
@@ -83,11 +107,30 @@ CONFIDENCE_MODEL = ConfidenceModel(
         0.423691626786044, 0.6011974902500591, 0.6712588041146128,
     ),
     weights=(
-        -0.2913618314081437, 0.4917585288021092, -1.4196536846363943,
-        0.5310622560133046, -0.4159795165987884, -0.3997737718022265,
-        0.9953210093981333, 1.8550014926446705, -0.27040134214723727,
-        -0.3527079763442606, 0.2738670465404719, 0.5396180376302737,
+        -0.30288661696267766, 0.4417321462560222, -1.337595961415421,
+        0.5284667825502662, -0.40136689342186527, -0.36165228135918176,
+        0.8859437213098846, 1.7960709879717838, -0.22599870865186175,
+        -0.3931027027533198, 0.3038628595345358, 0.48360244883349496,
     ),
-    intercept=3.9820817346704542,
-    refused={'implausible': 0.0009, 'rival': 0.101, 'degenerate': 0.1111},
+    intercept=4.21991077920179,
+    refused={'implausible': 0.0015, 'rival': 0.1205, 'degenerate': 0.1421},
+    calibration=(
+        (-6.2884769908339, 0.003765985825247809),
+        (-3.2841775126653543, 0.1134995700773862),
+        (-2.1747546438726273, 0.1477622543215724),
+        (-1.4411402488219238, 0.19289026275115917),
+        (-0.6390223087131153, 0.30188679245283034),
+        (0.26429176265076254, 0.46369449861671735),
+        (0.8764423880968771, 0.7357926221335991),
+        (1.2231698344389301, 0.7722369475436108),
+        (1.563903483989717, 0.8910994158810942),
+        (1.847965458309947, 0.9254092057563441),
+        (2.2446111875734767, 0.9424509140148952),
+        (2.552026682223251, 0.9424509140148952),
+        (2.7219352371068273, 0.9601954596355493),
+        (3.1553049019642097, 0.9866989117291415),
+        (3.8461675338308194, 0.9866989117291415),
+        (4.8661983106242745, 0.9952673019376471),
+        (7.793746886497953, 0.9995951417004049),
+    ),
     split='calibration: intel, aces, fhw, depot, empty_room')

@@ -80,9 +80,10 @@ class LocalizerConfig:
                                   'through-wall penalty): failed')
     ambiguity_margin: float = param(0.02, 'a distinct rival scoring within this of the best: '
                                           'ambiguous')
-    min_confidence: float = param(0.9, 'a pose that passes the rules is ok only when its '
-                                       'calibrated confidence P(right | evidence) reaches this '
-                                       '(chosen for 99.9 % precision on the calibration split)')
+    min_confidence: float = param(0.95, 'a pose that passes the rules is ok only when its '
+                                        'calibrated confidence P(right | evidence) reaches '
+                                        'this (chosen for 99.9 % precision on the calibration '
+                                        'split)')
     distinct_xy: float = param(0.5, 'poses further apart than this are distinct, metres')
     distinct_yaw: float = param(math.radians(10.0), '... or than this, rad')
     max_position_std: float = param(0.25, 'a larger reported position std along the weakest '

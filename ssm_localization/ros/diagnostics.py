@@ -4,8 +4,10 @@
 One status named ``<node name>: localization`` (hardware_id: the node's fully qualified name):
 level OK / WARN / ERROR for an ``ok`` / ``ambiguous`` / ``failed`` last localization; before the
 first localization OK when the map is indexed, WARN while there is no map or it is being
-indexed. Key-values: status, score, latency_ms, node (topological node id), candidates (count),
-map (``no map`` / ``indexing`` / ``ready``), frame, x / y / yaw, lifecycle state, mode.
+indexed. Key-values: status, confidence (the calibrated P(right | evidence) of the answer, the
+"am I lost" signal: an ``ok`` answer has at least ``min_confidence``), score, latency_ms, node
+(topological node id), candidates (count), map (``no map`` / ``indexing`` / ``ready``), frame,
+x / y / yaw, lifecycle state, mode.
 """
 from __future__ import annotations
 
@@ -39,14 +41,16 @@ def localization_status(node_name: str, fqn: str, map_state: str, loc: Any = Non
         status.level = DiagnosticStatus.OK if map_state == 'ready' else DiagnosticStatus.WARN
         status.message = ('ready, no localization yet' if map_state == 'ready'
                           else f'{map_state}: {map_detail}' if map_detail else map_state)
-        values = {'status': 'none', 'score': '', 'latency_ms': '', 'node': '-1',
-                  'candidates': '0'}
+        values = {'status': 'none', 'confidence': '', 'score': '', 'latency_ms': '',
+                  'node': '-1', 'candidates': '0'}
     else:
         status.level = LEVELS.get(loc.status, DiagnosticStatus.ERROR)
         pose = loc.pose if loc.pose is not None else (math.nan,) * 3
-        status.message = (f'{loc.status}: x={pose[0]:.3f} y={pose[1]:.3f} yaw={pose[2]:.4f}'
+        status.message = (f'{loc.status}: x={pose[0]:.3f} y={pose[1]:.3f} yaw={pose[2]:.4f} '
+                          f'confidence={float(loc.confidence):.3f}'
                           if loc.status == 'ok' else f'{loc.status}: {loc.message}')
-        values = {'status': loc.status, 'score': _number(loc.score, '.4f'),
+        values = {'status': loc.status, 'confidence': _number(loc.confidence, '.4f'),
+                  'score': _number(loc.score, '.4f'),
                   'latency_ms': _number(loc.latency_ms, '.1f'), 'node': str(int(loc.node)),
                   'candidates': str(len(loc.candidates or ())),
                   'x': _number(pose[0], '.4f'), 'y': _number(pose[1], '.4f'),

@@ -97,10 +97,11 @@ T = TypeVar('T')
 
 
 def format_result(loc: Localization) -> str:
-    """One line for the service answer / log: pose, node, status, score, latency."""
+    """One line for the service answer / log: pose, node, status, confidence, score, latency."""
     x, y, yaw = loc.pose
     return (f'x={x:.3f} y={y:.3f} yaw={yaw:.4f} node={loc.node} status={loc.status} '
-            f'score={float(loc.score):.3f} latency_ms={float(loc.latency_ms):.1f}')
+            f'confidence={float(loc.confidence):.3f} score={float(loc.score):.3f} '
+            f'latency_ms={float(loc.latency_ms):.1f}')
 
 
 @dataclass(frozen=True)

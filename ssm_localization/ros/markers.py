@@ -157,6 +157,9 @@ def localization_markers(localization, frame_id: str, stamp: Any = 0, top_n: int
         label.color = _color(rgb)
         label.text = f'#{rank + 1} node {getattr(cand, "node", -1)} ' \
                      f'score {float(getattr(cand, "score", float("nan"))):.3g}'
+        if rank == 0:               # the answer's own calibrated confidence
+            label.text += (f' | {getattr(localization, "status", "")} P(right) '
+                           f'{float(getattr(localization, "confidence", float("nan"))):.3f}')
         markers.append(label)
         node = getattr(cand, 'node', -1)
         if node_xy is not None and node is not None and 0 <= int(node) < len(node_xy):

@@ -13,6 +13,7 @@ import sys
 import xml.etree.ElementTree as ET
 
 from helpers import REPO, venv_bin
+from launch_ast import LaunchFile
 import pytest
 
 PKG = 'ssm_localization'
@@ -45,7 +46,6 @@ def test_colcon_build_installs_nodes_and_ament_index(tmp_path):
     assert (prefix / 'share' / PKG / 'package.xml').is_file()
     assert (prefix / 'share' / PKG / 'config' / 'ssm_localization.yaml').is_file()
     # launch files, the files they load, and the RViz config (see test_launch_files.py)
-    from test_launch_files import LaunchFile
     share = prefix / 'share' / PKG
     launch_files = sorted((REPO / 'launch').glob('*.launch.py'))
     assert launch_files

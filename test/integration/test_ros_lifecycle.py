@@ -22,6 +22,7 @@ from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+from ssm_localization.config.localization import LocalizerConfig
 from ssm_localization.io.bag_reader import read_bag
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_from_msg)
@@ -160,6 +161,9 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
     assert values['map'] == 'ready' and values['lifecycle'] == 'active'
     assert int(values['node']) >= -1 and float(values['score']) > 0
     assert float(values['latency_ms']) > 0 and int(values['candidates']) == len(cands.poses)
+    # the calibrated confidence of an ok answer reaches min_confidence
+    assert float(values['confidence']) >= LocalizerConfig().min_confidence
+    assert f"confidence={float(values['confidence']):.3f}" in status.message
 
     # deactivate: a waiting call is answered at once, later calls refused, nothing published
     future = rig.client.call_async(Trigger.Request())

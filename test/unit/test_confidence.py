@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from ssm_localization import build_index, GlobalLocalizer, read_bag
 from ssm_localization.config.confidence import CONFIDENCE_MODEL, ConfidenceModel
-from ssm_localization.evaluation.calibration import fit_confidence, reliability
+from ssm_localization.evaluation.calibration import fit_confidence, isotonic_knots, reliability
 from ssm_localization.files.yaml_input import load_yaml_file
 from ssm_localization.localization.confidence import feature_values
 from ssm_localization.localization.evidence import Evidence, unexplained_runs
@@ -86,14 +86,41 @@ def test_fit_recovers_a_known_logistic_model_and_its_probabilities_are_calibrate
     x = rng.normal(size=(4000, 2))
     p = 1.0 / (1.0 + np.exp(-(0.5 + 2.0 * x[:, 0] - 1.0 * x[:, 1])))
     y = rng.random(4000) < p
-    model = fit_confidence([{'a': a, 'b': b} for a, b in x], y, ('a', 'b'), l2=1e-3)
+    groups = [f'building {k % 4}' for k in range(4000)]
+    model = fit_confidence([{'a': a, 'b': b} for a, b in x], y, ('a', 'b'), groups, l2=1e-3)
     w = np.array(model.weights) / np.array(model.scale)
     assert w == pytest.approx([2.0, -1.0], rel=0.15)
+    # the isotonic map is monotone and close to the logistic curve it stands for
+    knots = np.array(model.calibration)
+    assert len(knots) >= 5 and np.all(np.diff(knots, axis=0) >= 0)
+    logistic = 1.0 / (1.0 + np.exp(-knots[:, 0]))
+    assert np.abs(knots[:, 1] - logistic).max() < 0.15
     probs = [model.probability({'a': a, 'b': b}) for a, b in x]
     for b in reliability(probs, y):
         if b.count >= 100:        # within three binomial standard deviations
             sigma = math.sqrt(b.mean_confidence * (1 - b.mean_confidence) / b.count)
             assert abs(b.gap) < 3 * sigma + 0.01, b
+
+
+def test_isotonic_knots_pool_violators_and_never_say_certain():
+    z = np.arange(10.0)
+    y = np.array([0, 0, 1, 0, 0, 1, 1, 1, 1, 1], bool)        # one violator pair at 2-4
+    knots = isotonic_knots(z, y, min_weight=1.0)
+    probs = [p for _, p in knots]
+    assert probs == sorted(probs) and 0.0 < probs[0] and probs[-1] < 1.0
+    assert knots[1] == pytest.approx((3.0, (1 + 0.5) / (3 + 1)))       # 2, 3, 4 pooled
+    # light blocks are merged into a neighbour
+    assert all(b >= 0 for b in np.diff([k for k, _ in isotonic_knots(z, y, min_weight=4.0)]))
+    assert len(isotonic_knots(z, y, min_weight=4.0)) < len(knots)
+
+
+def test_calibrated_probability_interpolates_the_knots():
+    model = dataclasses.replace(CONFIDENCE_MODEL, calibration=((-1.0, 0.1), (1.0, 0.9)))
+    assert model.calibrated(-5.0) == 0.1 and model.calibrated(5.0) == 0.9
+    assert model.calibrated(0.0) == pytest.approx(0.5)
+    assert dataclasses.replace(model, calibration=()).calibrated(0.0) == 0.5
+    with pytest.raises(ValueError, match='knots'):
+        dataclasses.replace(model, calibration=((1.0, 0.9), (-1.0, 0.1)))
 
 
 def test_reliability_bins():
@@ -122,6 +149,8 @@ def test_the_shipped_model_is_the_calibrated_one():
         assert fitted[key] == pytest.approx(list(shipped[key]), rel=1e-9)
     assert fitted['intercept'] == pytest.approx(shipped['intercept'], rel=1e-9)
     assert fitted['refused'] == shipped['refused']
+    assert np.array(fitted['calibration']) == pytest.approx(np.array(shipped['calibration']),
+                                                            rel=1e-9)
     assert 'calibration' in fitted['split']
 
 
