@@ -31,9 +31,10 @@ from __future__ import annotations
 from collections.abc import Callable
 import copy
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 import time
+from typing import Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -57,12 +58,20 @@ from ..matching.scan import MAX_RANGE, ranges_to_points
 from ..matching.spectral import binarize, leading_eigenvector, matching_score
 from ..transforms import apply, compose, inverse, Pose2, wrap_angle
 
-STATUSES = ('ok', 'ambiguous', 'failed')
+#: the statuses of an answer: confident, several places fit (or too little evidence), no estimate
+OK, AMBIGUOUS, FAILED = 'ok', 'ambiguous', 'failed'
+STATUSES = (OK, AMBIGUOUS, FAILED)
+Status = Literal['ok', 'ambiguous', 'failed']
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class Hypothesis:
-    """One candidate pose. ``laser_pose`` is the laser in the map frame, ``pose`` the base."""
+    """
+    One candidate pose, a value: each stage returns new hypotheses (``dataclasses.replace``).
+
+    ``laser_pose`` is the laser in the map frame, ``pose`` the base; ``refined`` once refined on
+    the wall surface, ``check`` once verified by ray casting.
+    """
 
     source: str
     initial_pose: Pose2                     # laser pose before refinement
@@ -78,10 +87,10 @@ class Hypothesis:
     vicinity: float = 0.0                   # eq. (10), paper mode
     refined: bool = False
     score: float = 0.0                      # explained - weight x through-wall fraction
-    found_by: set[str] = field(default_factory=set)   # sources of the duplicates merged into it
+    found_by: frozenset[str] = frozenset()  # sources of the duplicates merged into it
 
     def __post_init__(self) -> None:
-        self.found_by.add(self.source)
+        object.__setattr__(self, 'found_by', frozenset(self.found_by) | {self.source})
 
     @property
     def contradicting(self) -> float:
@@ -123,7 +132,7 @@ class Query:
 class Localization:
     """The answer for one scan. ``pose`` is the robot base in the map frame."""
 
-    status: str
+    status: Status
     pose: Pose2 | None
     covariance: np.ndarray = field(default_factory=lambda: np.diag([1e3, 1e3, 1e3]))
     node: int = -1
@@ -137,7 +146,7 @@ class Localization:
 
     @property
     def ok(self) -> bool:
-        return self.status == 'ok'
+        return self.status == OK
 
 
 def vicinity_score(node_points: np.ndarray, query_points: np.ndarray, pose: Pose2,
@@ -169,20 +178,21 @@ def _merged(ranked: list[Hypothesis], pose_of) -> list[Hypothesis]:
     """
     ``ranked`` without duplicates (the same pose within 5 cm and 0.02 rad).
 
-    The first of each stays and records the sources of the others in ``found_by``.
+    The first of each stays, with the sources of the others added to its ``found_by``.
     """
     out: list[Hypothesis] = []
     for h in ranked:
-        twin = next((o for o in out if not distinct(pose_of(h), pose_of(o), 0.05, 0.02)), None)
-        if twin is None:
+        k = next((k for k, o in enumerate(out)
+                  if not distinct(pose_of(h), pose_of(o), 0.05, 0.02)), None)
+        if k is None:
             out.append(h)
-        else:
-            twin.found_by |= h.found_by
+        elif not h.found_by <= out[k].found_by:
+            out[k] = replace(out[k], found_by=out[k].found_by | h.found_by)
     return out
 
 
-class _Clock:
-    """Milliseconds per stage."""
+class StageClock:
+    """Milliseconds per stage of one localization (``Localization.stages``)."""
 
     def __init__(self) -> None:
         self.t0 = self.last = time.perf_counter()
@@ -258,7 +268,7 @@ class GlobalLocalizer:
     def localize_scan(self, ranges, angle_min: float, angle_increment: float,
                       range_min: float = 0.0, range_max: float = float('inf')) -> Localization:
         """Localize a LaserScan given by its ranges and beam geometry."""
-        clock = _Clock()
+        clock = StageClock()
         try:
             query = self.prepare_scan(ranges, angle_min, angle_increment, range_min, range_max)
         except ValueError as exc:
@@ -267,7 +277,7 @@ class GlobalLocalizer:
 
     def localize_points(self, points_xy: np.ndarray) -> Localization:
         """Localize laser-frame points given in scan order (no no-return information)."""
-        clock = _Clock()
+        clock = StageClock()
         try:
             pts = np.asarray(points_xy, dtype=float)
             if pts.ndim != 2 or pts.shape[1] != 2:
@@ -305,34 +315,33 @@ class GlobalLocalizer:
         return Query(features=prepare_scan(points, self.matcher_config), points=points,
                      angles=angles, beams=beams, range_max=limit)
 
-    def localize_query(self, query: Query, clock: _Clock | None = None) -> Localization:
+    def localize_query(self, query: Query, clock: StageClock | None = None) -> Localization:
         """Return the whole pipeline on a prepared query."""
-        clock = clock or _Clock()
+        clock = clock or StageClock()
         clock.lap('prepare')
         if self.config.paper_mode:
             return self._paper(query, clock)
-        hyps = self.spectral_hypotheses(query, clock)
-        self._correlate(query, hyps)
+        hyps = self.correlate(query, self.spectral_hypotheses(query, clock))
         if self.config.search:
             seeds = _by_correlation(hyps)
             found = self.search_hypotheses(
                 query, self.search_yaws(query, [h.initial_pose[2] for h in seeds]))
-            self._correlate(query, found)       # scored as the spectral ones are
-            hyps += found
+            hyps += self.correlate(query, found)        # scored as the spectral ones are
             clock.lap('search')
         if not hyps:
             return self._failed(clock, 'no pose hypothesis: neither the pose votes nor the '
                                        'correlative search found a place that fits')
         ranked = _by_correlation(hyps)
-        refined = self.refine(query, ranked)
+        limit = self.config.refine_hypotheses
+        refined = self.refine(query, ranked, limit)
         clock.lap('refine')
-        self.verify_contenders(query, refined)
+        verified = self.verify_contenders(query, refined)
         clock.lap('verify')
-        return self.decide(query, refined, clock,
-                           others=[h for h in ranked if not h.refined])
+        return self.decide(query, verified, clock, others=ranked[limit:])
 
     # -- stages -----------------------------------------------------------------------------
-    def spectral_hypotheses(self, query: Query, clock: _Clock | None = None) -> list[Hypothesis]:
+    def spectral_hypotheses(self, query: Query,
+                            clock: StageClock | None = None) -> list[Hypothesis]:
         """Pose voting, spectral coarse ranking of the peaks (eq. 5), RANSAC fine pose."""
         cfg = self.config
         feats = query.features
@@ -434,21 +443,21 @@ class GlobalLocalizer:
         n = int(round(cfg.search_spread / cfg.search_step))
         return np.concatenate([base + cfg.search_step * k for k in range(-n, n + 1)])
 
-    def _correlate(self, query: Query, hyps: list[Hypothesis]) -> None:
-        """Set the correlative score (mean point likelihood) of each hypothesis' initial pose."""
+    def correlate(self, query: Query, hyps: list[Hypothesis]) -> list[Hypothesis]:
+        """Return ``hyps`` with the correlative score (mean point likelihood) of their poses."""
         if not hyps:
-            return
+            return []
         scores = self.grid.score_poses(query.features.points,
                                        np.array([h.initial_pose for h in hyps]))
-        for h, s in zip(hyps, scores):
-            h.correlative = float(s)
+        return [replace(h, correlative=float(s)) for h, s in zip(hyps, scores)]
 
     def refine(self, query: Query, hyps: list[Hypothesis],
                limit: int | None = None) -> list[Hypothesis]:
         """
-        Refine the ``refine_hypotheses`` first hypotheses on the wall surface (batched).
+        Return the first ``limit`` hypotheses refined on the wall surface (batched).
 
-        Merge those that meet; best explained first.
+        ``limit`` defaults to ``refine_hypotheses``; those that meet are merged; best explained
+        first.
         """
         cfg = self.config
         todo = hyps[:cfg.refine_hypotheses if limit is None else limit]
@@ -459,18 +468,18 @@ class GlobalLocalizer:
                                iterations=cfg.refine_iterations, truncate=cfg.refine_radius,
                                estimate_depth=cfg.estimate_depth,
                                depth_prior=cfg.surface_depth_std, score_sigma=cfg.score_sigma)
-        for h, r in zip(todo, results):
-            h.laser_pose, h.explained, h.depth, h.refined = r.pose, r.explained, r.depth, True
-            h.score = h.explained
-            h.pose = self.base_pose(h.laser_pose)
-            h.covariance = self.report_covariance(r.covariance, h.laser_pose)
-        return _merged(sorted(todo, key=lambda h: -h.explained), lambda h: h.laser_pose)
+        done = [replace(h, laser_pose=r.pose, explained=r.explained, depth=r.depth, refined=True,
+                        score=r.explained, pose=self.base_pose(r.pose),
+                        covariance=self.report_covariance(r.covariance, r.pose))
+                for h, r in zip(todo, results)]
+        return _merged(sorted(done, key=lambda h: -h.explained), lambda h: h.laser_pose)
 
     def verify_contenders(self, query: Query, refined: list[Hypothesis],
                           first: int | None = None, margin: float | None = None,
-                          plausible: Callable[[Hypothesis], bool] | None = None) -> None:
+                          plausible: Callable[[Hypothesis], bool] | None = None
+                          ) -> list[Hypothesis]:
         """
-        Verify every hypothesis that could win or be a rival.
+        Return ``refined`` with every hypothesis that could win or be a rival verified.
 
         ``refined`` comes best explained first. First the ``first`` best (default: the
         ``verify_hypotheses`` best and every one within ``verify_margin`` of the best explained
@@ -480,50 +489,72 @@ class GlobalLocalizer:
         be neither. ``plausible(h)`` defaults to at most ``max_contradicting`` through walls.
         """
         cfg = self.config
-        if not refined:
-            return
+        out = list(refined)
+        if not out:
+            return out
         margin = cfg.ambiguity_margin if margin is None else margin
         limit = cfg.max_contradicting
         plausible = plausible or (lambda h: h.contradicting <= limit)
         if first is None:
-            top = refined[0].explained
-            batch = [h for k, h in enumerate(refined)
+            top = out[0].explained
+            batch = [k for k, h in enumerate(out)
                      if k < cfg.verify_hypotheses or h.explained >= top - cfg.verify_margin]
         else:
-            batch = refined[:first]
+            batch = list(range(min(first, len(out))))
         while batch:
-            self.verify(query, batch)
-            best = max((h.score for h in refined if h.check is not None and plausible(h)),
+            for k, h in zip(batch, self.verify(query, [out[k] for k in batch])):
+                out[k] = h
+            best = max((h.score for h in out if h.check is not None and plausible(h)),
                        default=-np.inf)
-            batch = [h for h in refined if h.check is None and h.explained >= best - margin]
+            batch = [k for k, h in enumerate(out)
+                     if h.check is None and h.explained >= best - margin]
+        return out
 
-    def verify(self, query: Query, hyps: list[Hypothesis]) -> None:
-        """Ray-cast the query's beams from every hypothesis at once; compare with the scan."""
+    def verify(self, query: Query, hyps: list[Hypothesis]) -> list[Hypothesis]:
+        """Return ``hyps`` verified: the query's beams ray-cast from each (all at once)."""
         if not hyps:
-            return
+            return []
         cfg = self.config
         angles, measured = query.picked_beams(cfg.verify_beams, cfg.max_cast_range)
         expected = self.caster.cast(np.array([h.laser_pose for h in hyps]), angles,
                                     cfg.max_cast_range)
+        out = []
         for h, e in zip(hyps, expected):
-            h.check = check_beams(measured, e, tol=cfg.beam_tolerance, range_limit=query.range_max)
-            h.score = h.explained - cfg.contradiction_weight * h.check.contradicting
+            check = check_beams(measured, e, tol=cfg.beam_tolerance, range_limit=query.range_max)
+            out.append(replace(h, check=check, score=h.explained
+                               - cfg.contradiction_weight * check.contradicting))
+        return out
 
-    def polish(self, query: Query, h: Hypothesis) -> None:
-        """Return a last Gauss-Newton run of one hypothesis on every endpoint of the scan."""
+    def polish(self, query: Query, h: Hypothesis) -> Hypothesis:
+        """Return ``h`` after a last Gauss-Newton run on every endpoint of the scan."""
         cfg = self.config
         if cfg.polish_iterations <= 0:
-            return
+            return h
         r = refine_poses(self.surface, query.points, np.array([h.laser_pose]),
                          iterations=cfg.polish_iterations,
                          truncate=(cfg.refine_radius[1], cfg.refine_radius[1]),
                          estimate_depth=cfg.estimate_depth, depth_prior=cfg.surface_depth_std,
                          score_sigma=cfg.score_sigma)[0]
-        h.laser_pose, h.depth = r.pose, r.depth
-        h.pose = self.base_pose(h.laser_pose)
-        h.covariance = self.report_covariance(r.covariance, h.laser_pose)
+        return replace(h, laser_pose=r.pose, depth=r.depth, pose=self.base_pose(r.pose),
+                       covariance=self.report_covariance(r.covariance, r.pose))
 
-    def decide(self, query: Query, hyps: list[Hypothesis], clock: _Clock | None = None,
+    def verified_at(self, query: Query, pose: Pose2, like: Hypothesis) -> Hypothesis:
+        """
+        Return a hypothesis at the base pose ``pose``, scored and verified as ``like`` was.
+
+        Its explained fraction is measured as :meth:`refine` measures it, with the wall offset
+        ``like`` estimated, then it is ray-cast (the tracker's fused poses).
+        """
+        laser = self.laser_pose(pose)
+        explained = self.surface.explained(apply(laser, query.features.points),
+                                           like.depth - self.surface.depth,
+                                           self.config.score_sigma)
+        h = Hypothesis(source=like.source, initial_pose=laser, laser_pose=laser, pose=pose,
+                       covariance=like.covariance, explained=float(explained), depth=like.depth,
+                       refined=True)
+        return self.verify(query, [h])[0]
+
+    def decide(self, query: Query, hyps: list[Hypothesis], clock: StageClock | None = None,
                others: list[Hypothesis] = ()) -> Localization:
         """
         Return the answer from refined and verified hypotheses.
@@ -533,43 +564,44 @@ class GlobalLocalizer:
         ``candidates`` of the answer: the verified hypotheses by score, then the refined ones,
         then ``others`` (not refined), for diagnosis (``bench localize`` reads them).
         """
-        clock = clock or _Clock()
+        clock = clock or StageClock()
         cfg = self.config
         limit = cfg.max_contradicting
         checked = sorted((h for h in hyps if h.check is not None),
                          key=lambda h: (h.contradicting > limit, -h.score))
         if not checked:
             return self._failed(clock, 'no verified hypothesis')
-        best = checked[0]
-        rival = self.best_rival(query, best, hyps)
-        self.polish(query, best)
+        rival, hyps = self.best_rival(query, checked[0], hyps)
+        best = self.polish(query, checked[0])
+        ranked = [best] + checked[1:]
         evidence = self.evidence(query, best, rival)
-        status, message, cov, conf = verdict(checked, cfg, evidence, self.confidence_model)
+        status, message, cov, conf = verdict(ranked, cfg, evidence, self.confidence_model)
         clock.lap('decide')
         return Localization(status=status, pose=best.pose, covariance=cov, node=best.node,
                             score=best.score, message=message, latency_ms=clock.total_ms,
                             stages=clock.stages, confidence=conf, evidence=evidence,
-                            candidates=checked + [h for h in hyps if h.check is not None
-                                                  and all(h is not c for c in checked)]
+                            candidates=ranked + [h for h in hyps if h.check is not None
+                                                 and all(h is not c for c in checked)]
                             + [h for h in hyps if h.check is None] + list(others))
 
-    def best_rival(self, query: Query, best: Hypothesis, hyps: list[Hypothesis]) -> float:
+    def best_rival(self, query: Query, best: Hypothesis,
+                   hyps: list[Hypothesis]) -> tuple[float, list[Hypothesis]]:
         """
-        Return the score of the best place distinct from ``best`` (0 when there is none).
+        Return the score of the best place distinct from ``best`` and ``hyps`` with it verified.
 
-        The refined hypothesis distinct from ``best`` that explains most of the scan is verified
-        if it was not yet, so the margin of the answer (``evidence.py``) is always measured
-        against a ray-cast rival.
+        The score is 0 when there is none. The refined hypothesis distinct from ``best`` that
+        explains most of the scan is verified if it was not yet, so the margin of the answer
+        (``evidence.py``) is always measured against a ray-cast rival.
         """
         cfg = self.config
-        others = [h for h in hyps if h is not best and h.refined
+        others = [k for k, h in enumerate(hyps) if h is not best and h.refined
                   and distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)]
         if not others:
-            return 0.0
-        top = max(others, key=lambda h: h.explained)
-        if top.check is None:
-            self.verify(query, [top])
-        return max(h.score for h in others if h.check is not None)
+            return 0.0, hyps
+        top = max(others, key=lambda k: hyps[k].explained)
+        if hyps[top].check is None:
+            hyps = hyps[:top] + self.verify(query, [hyps[top]]) + hyps[top + 1:]
+        return max(hyps[k].score for k in others if hyps[k].check is not None), hyps
 
     def evidence(self, query: Query, h: Hypothesis, rival: float) -> Evidence:
         """Return the evidence for the verified ``h``; its best distinct rival scores ``rival``."""
@@ -598,7 +630,7 @@ class GlobalLocalizer:
         return lever_arm_covariance(cov, off)
 
     # -- the paper's pipeline -----------------------------------------------------------------
-    def _paper(self, query: Query, clock: _Clock) -> Localization:
+    def _paper(self, query: Query, clock: StageClock) -> Localization:
         """
         Section IV as written.
 
@@ -631,13 +663,13 @@ class GlobalLocalizer:
             return self._failed(clock, 'no candidate node gave a consistent match')
         hyps.sort(key=lambda h: -h.vicinity)
         best = hyps[0]
-        return Localization(status='ok', pose=best.pose, node=best.node, score=best.vicinity,
+        return Localization(status=OK, pose=best.pose, node=best.node, score=best.vicinity,
                             candidates=hyps, latency_ms=clock.total_ms, stages=clock.stages,
                             message='paper mode: largest vicinity score')
 
     @staticmethod
-    def _failed(clock: _Clock, message: str) -> Localization:
-        return Localization(status='failed', pose=None, latency_ms=clock.total_ms,
+    def _failed(clock: StageClock, message: str) -> Localization:
+        return Localization(status=FAILED, pose=None, latency_ms=clock.total_ms,
                             message=message, stages=clock.stages)
 
 
@@ -649,7 +681,7 @@ def _evenly(points: np.ndarray, count: int) -> np.ndarray:
 
 
 def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence | None = None,
-            model: ConfidenceModel = CONFIDENCE_MODEL) -> tuple[str, str, np.ndarray, float]:
+            model: ConfidenceModel = CONFIDENCE_MODEL) -> tuple[Status, str, np.ndarray, float]:
     """
     ``(status, message, covariance, confidence)`` for verified hypotheses, plausible ones first.
 
@@ -667,13 +699,13 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence |
     best = ranked[0]
     cov = best.covariance if best.covariance is not None else np.diag([1e3, 1e3, 1e3])
     if best.contradicting > cfg.max_contradicting:
-        return 'failed', (f'no pose agrees with the map: at the best, {best.contradicting:.0%} of '
-                          f'the beams see through walls (> {cfg.max_contradicting:.0%})'), \
+        return FAILED, (f'no pose agrees with the map: at the best, {best.contradicting:.0%} of '
+                        f'the beams see through walls (> {cfg.max_contradicting:.0%})'), \
             _inflated(cov), model.refused['implausible']
     if best.score < cfg.min_score:
-        return 'failed', (f'the best pose explains too little of the scan (explained '
-                          f'{best.explained:.0%}, through walls {best.contradicting:.0%}: '
-                          f'score {best.score:.2f} < {cfg.min_score})'), _inflated(cov), \
+        return FAILED, (f'the best pose explains too little of the scan (explained '
+                        f'{best.explained:.0%}, through walls {best.contradicting:.0%}: '
+                        f'score {best.score:.2f} < {cfg.min_score})'), _inflated(cov), \
             model.refused['implausible']
     rivals = [h for h in ranked[1:]
               if distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)
@@ -681,21 +713,21 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence |
     if rivals:
         spread = np.array([h.pose for h in rivals + [best]])
         cov = cov + np.diag([*np.var(spread[:, :2], axis=0), np.pi ** 2 / 3.0])
-        return 'ambiguous', (f'{len(rivals) + 1} distinct poses fit about equally well '
-                             f'(scores {best.score:.2f} and '
-                             f'{max(h.score for h in rivals):.2f})'), cov, model.refused['rival']
+        return AMBIGUOUS, (f'{len(rivals) + 1} distinct poses fit about equally well '
+                           f'(scores {best.score:.2f} and '
+                           f'{max(h.score for h in rivals):.2f})'), cov, model.refused['rival']
     std = position_std(cov)
     if std > cfg.max_position_std:
-        return 'ambiguous', (f'degenerate geometry (e.g. a corridor): position std {std:.2f} m '
-                             f'along the weakest direction'), cov, model.refused['degenerate']
+        return AMBIGUOUS, (f'degenerate geometry (e.g. a corridor): position std {std:.2f} m '
+                           f'along the weakest direction'), cov, model.refused['degenerate']
     conf = confidence(evidence, model)
     facts = (f'explained {best.explained:.0%}, through walls {best.contradicting:.0%}, '
              f'position std {std * 1e3:.0f} mm, confidence {conf:.3f}')
     if conf >= cfg.min_confidence:
-        return 'ok', facts, cov, conf
+        return OK, facts, cov, conf
     if conf >= 0.5:
-        return 'ambiguous', f'low confidence (< {cfg.min_confidence}): {facts}', cov, conf
-    return ('failed', f'the best pose is more likely wrong than right: {facts}', _inflated(cov),
+        return AMBIGUOUS, f'low confidence (< {cfg.min_confidence}): {facts}', cov, conf
+    return (FAILED, f'the best pose is more likely wrong than right: {facts}', _inflated(cov),
             conf)
 
 

@@ -39,20 +39,23 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 import math
 import time
+from typing import Literal
 
 import numpy as np
 
 from .confidence import confidence
 from .evidence import covariance_stds, Evidence
 from .fusion import fuse_weak, lever_arm_covariance, mahalanobis2
-from .localizer import (distinct, GlobalLocalizer, Hypothesis, Localization, position_std,
-                        Query, STATUSES)
+from .localizer import (AMBIGUOUS, distinct, FAILED, GlobalLocalizer, Hypothesis, Localization,
+                        OK, position_std, Query, Status, STATUSES)
 from .motion import check_pose, Increment, predict
 from ..config.tracking import TrackerConfig
 from ..transforms import apply, Pose2, wrap_angle
 
 #: where a result's pose came from: the track, global localization, or nowhere verified
-MODES = ('tracked', 'relocalized', 'lost')
+TRACKED, RELOCALIZED, LOST = 'tracked', 'relocalized', 'lost'
+TRACK_MODES = (TRACKED, RELOCALIZED, LOST)
+TrackMode = Literal['tracked', 'relocalized', 'lost']
 #: covariance of a prior given without one: 0.5 m, 15 deg
 DEFAULT_PRIOR_STD = (0.5, math.radians(15.0))
 
@@ -66,10 +69,10 @@ class TrackResult:
     is none), ``predicted`` the motion prediction it started from.
     """
 
-    status: str
+    status: Status
     pose: Pose2 | None
     covariance: np.ndarray = field(default_factory=lambda: np.diag([1e3, 1e3, 1e3]))
-    mode: str = 'lost'
+    mode: TrackMode = LOST
     stamp: float = math.nan
     latency_ms: float = 0.0
     score: float = math.nan
@@ -82,8 +85,8 @@ class TrackResult:
 
     @property
     def ok(self) -> bool:
-        """Tell whether the answer is confident (``status == 'ok'``)."""
-        return self.status == 'ok'
+        """Tell whether the answer is confident (``status == OK``)."""
+        return self.status == OK
 
     def as_localization(self) -> Localization:
         """Return the answer as a :class:`Localization` (what the nodes publish and report)."""
@@ -99,7 +102,7 @@ class TrackResult:
 class _Attempt:
     """The outcome of tracking one scan around a prediction."""
 
-    status: str
+    status: Status
     message: str
     pose: Pose2 | None = None
     covariance: np.ndarray | None = None
@@ -199,7 +202,7 @@ class Tracker:
         try:
             odom = None if odom is None else check_pose(odom)
         except ValueError as exc:
-            return self._result(t0, stamp, 'failed', None, f'bad odometry: {exc}')
+            return self._result(t0, stamp, FAILED, None, f'bad odometry: {exc}')
         inc, note = None, ''
         if odom is not None and self._odom is not None:
             inc = Increment.between(self._odom, odom)
@@ -216,12 +219,12 @@ class Tracker:
                 scan.range_max)
         except (AttributeError, TypeError, ValueError) as exc:
             self._miss()
-            return self._result(t0, stamp, 'failed', pred, f'{note}bad scan: {exc}',
-                                predicted=pred, mode='lost' if pred is None else 'tracked')
+            return self._result(t0, stamp, FAILED, pred, f'{note}bad scan: {exc}',
+                                predicted=pred, mode=LOST if pred is None else TRACKED)
         if pred is None:
             return self._relocalize(t0, stamp, query, note + 'no track: ')
         attempt = self._track(query, pred, pred_cov)
-        if attempt.status == 'failed':
+        if attempt.status == FAILED:
             return self._relocalize(t0, stamp, query, f'{note}track lost ({attempt.message}): ',
                                     pred, pred_cov)
         if attempt.truncated or self._doubtful(attempt.score):
@@ -245,27 +248,26 @@ class Tracker:
                                                             laser[0] + hx, laser[1] + hy))
         hyps = [Hypothesis(source='prior', initial_pose=laser)] + leaves[:cfg.track_hypotheses]
         refined = loc.refine(query, hyps, limit=len(hyps))
-        # squared Mahalanobis distance of each refined pose from the prediction
-        prior = {id(h): mahalanobis2(h.pose, pred, pred_cov + h.covariance) for h in refined}
-        gated = [h for h in refined if prior[id(h)] <= cfg.gate_chi2]
+        gated = [h for h in refined if self._prior_m2(h, pred, pred_cov) <= cfg.gate_chi2]
         if not gated:
-            return _Attempt('failed', f'no pose within the gate of the prediction '
-                                      f'({len(refined)} refined)')
+            return _Attempt(FAILED, f'no pose within the gate of the prediction '
+                                    f'({len(refined)} refined)')
         # the best first, then only the poses that could still win or be a rival (within
         # ``rival_margin``): most scans cast one pose
-        loc.verify_contenders(query, gated, first=1, margin=cfg.rival_margin,
-                              plausible=self._plausible)
-        verified = sorted((h for h in gated if h.check is not None),
+        checked = loc.verify_contenders(query, gated, first=1, margin=cfg.rival_margin,
+                                        plausible=self._plausible)
+        verified = sorted((h for h in checked if h.check is not None),
                           key=lambda h: (not self._plausible(h), -h.score))
         top = verified[0]
         if not self._plausible(top):
-            return _Attempt('failed', f'verification failed: explained {top.explained:.0%}, '
-                                      f'through walls {top.contradicting:.0%}, score '
-                                      f'{top.score:.2f}')
-        # the poses the scan cannot tell apart: the prediction picks among them
-        contenders = [h for h in verified
+            return _Attempt(FAILED, f'verification failed: explained {top.explained:.0%}, '
+                                    f'through walls {top.contradicting:.0%}, score '
+                                    f'{top.score:.2f}')
+        # the poses the scan cannot tell apart: the prediction picks among them; each with the
+        # squared Mahalanobis distance of its pose from the prediction
+        contenders = [(h, self._prior_m2(h, pred, pred_cov)) for h in verified
                       if self._plausible(h) and h.score >= top.score - cfg.rival_margin]
-        best = min(contenders, key=lambda h: prior[id(h)])
+        best, best_m2 = min(contenders, key=lambda c: c[1])
         pose, cov = fuse_weak(best.pose, best.covariance, pred, pred_cov, cfg.weak_std)
         fused = self._verified(query, best, pose)
         if not self._plausible(fused):
@@ -281,31 +283,36 @@ class Tracker:
         conf = confidence(evidence, loc.confidence_model)
         common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated,
                   'confidence': conf, 'evidence': evidence}
-        rivals = [h for h in contenders if h is not best
-                  and prior[id(h)] <= prior[id(best)] + cfg.rival_prior_chi2
+        rivals = [h for h, m2 in contenders if h is not best
+                  and m2 <= best_m2 + cfg.rival_prior_chi2
                   and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)
                   and mahalanobis2(h.pose, best.pose, h.covariance + best.covariance)
                   > cfg.rival_chi2]
         if rivals:
-            return _Attempt('ambiguous', f'{len(rivals) + 1} distinct poses near the prediction '
-                                         f'fit about equally well', **common)
+            return _Attempt(AMBIGUOUS, f'{len(rivals) + 1} distinct poses near the prediction '
+                                       f'fit about equally well', **common)
         std_xy = position_std(cov)
         if std_xy > cfg.max_position_std:
-            return _Attempt('ambiguous', f'position std {std_xy:.2f} m along the weakest '
-                                         f'direction even with the prediction', **common)
+            return _Attempt(AMBIGUOUS, f'position std {std_xy:.2f} m along the weakest '
+                                       f'direction even with the prediction', **common)
         facts = (f'explained {best.explained:.0%}, through walls {fused.contradicting:.0%}, '
                  f'position std {std_xy * 1e3:.0f} mm, confidence {conf:.3f}')
         if conf < 0.5:
-            return _Attempt('failed', f'the tracked pose is more likely wrong than right: {facts}',
+            return _Attempt(FAILED, f'the tracked pose is more likely wrong than right: {facts}',
                             **common)
         if conf < lc.min_confidence:
-            return _Attempt('ambiguous', f'tracked with low confidence: {facts}', **common)
-        return _Attempt('ok', f'tracked: {facts}', **common)
+            return _Attempt(AMBIGUOUS, f'tracked with low confidence: {facts}', **common)
+        return _Attempt(OK, f'tracked: {facts}', **common)
 
     def _plausible(self, h: Hypothesis) -> bool:
         """Tell whether a verified pose explains enough of the scan, few beams through walls."""
         return (h.score >= self.config.min_score
                 and h.contradicting <= self.localizer.config.max_contradicting)
+
+    @staticmethod
+    def _prior_m2(h: Hypothesis, pred: Pose2, pred_cov: np.ndarray) -> float:
+        """Return the squared Mahalanobis distance of ``h`` from the prediction."""
+        return mahalanobis2(h.pose, pred, pred_cov + h.covariance)
 
     def _verified(self, query: Query, best: Hypothesis, pose: Pose2) -> Hypothesis:
         """
@@ -313,18 +320,9 @@ class Tracker:
 
         Returns ``best`` itself when the fusion left it where it was (within 1 cm, 0.2 deg).
         """
-        loc = self.localizer
         if mahalanobis2(pose, best.pose, np.diag([0.01 ** 2, 0.01 ** 2, 0.003 ** 2])) <= 1.0:
             return best
-        laser = loc.laser_pose(pose)
-        # the explained fraction as refine() measures it, with the wall offset it estimated
-        explained = loc.surface.explained(apply(laser, query.features.points),
-                                          best.depth - loc.surface.depth, loc.config.score_sigma)
-        h = Hypothesis(source='prior', initial_pose=laser, laser_pose=laser, pose=pose,
-                       covariance=best.covariance, explained=float(explained),
-                       depth=best.depth, refined=True)
-        loc.verify(query, [h])
-        return h
+        return self.localizer.verified_at(query, pose, best)
 
     def _doubtful(self, score: float) -> bool:
         """
@@ -358,9 +356,8 @@ class Tracker:
         rival = None
         if others:
             refined = loc.refine(query, others, limit=cfg.check_hypotheses)
-            refined = [h for h in refined if distinct(h.pose, attempt.pose, lc.distinct_xy,
-                                                      lc.distinct_yaw)][:2]
-            loc.verify(query, refined)
+            refined = loc.verify(query, [h for h in refined if distinct(
+                h.pose, attempt.pose, lc.distinct_xy, lc.distinct_yaw)][:2])
             rival = max(refined, key=lambda h: h.score, default=None)
         if rival is None or rival.score < attempt.score + cfg.switch_margin:
             found = 'no other place' if rival is None else f'elsewhere {rival.score:.2f}'
@@ -369,16 +366,16 @@ class Tracker:
         glob = loc.localize_query(query)
         why = (f'{note}the tracked pose fits poorly (score {attempt.score:.2f}) and another place '
                f'better (score {rival.score:.2f}): ')
-        if glob.status == 'ok' and distinct(glob.pose, attempt.pose, lc.distinct_xy,
-                                            lc.distinct_yaw):
+        if glob.status == OK and distinct(glob.pose, attempt.pose, lc.distinct_xy,
+                                          lc.distinct_yaw):
             return self._adopt(t0, stamp, glob, why + 'kidnapped? relocalized: ', pred)
-        if glob.status == 'ok':
+        if glob.status == OK:
             return self._keep(t0, stamp, attempt, pred, why + 'global localization confirms '
                               'the track', glob)
         self._miss()
-        return self._result(t0, stamp, 'ambiguous', attempt.pose, why + f'global localization '
+        return self._result(t0, stamp, AMBIGUOUS, attempt.pose, why + f'global localization '
                             f'{glob.status}: {glob.message}', covariance=attempt.covariance,
-                            score=attempt.score, predicted=pred, mode='tracked',
+                            score=attempt.score, predicted=pred, mode=TRACKED,
                             localization=glob, confidence=min(attempt.confidence, 0.5),
                             evidence=attempt.evidence)
 
@@ -386,11 +383,11 @@ class Tracker:
               glob: Localization | None = None) -> TrackResult:
         """Make the tracked pose the belief."""
         self._pose, self._cov, self._misses = attempt.pose, attempt.covariance, 0
-        if attempt.status == 'ok':
+        if attempt.status == OK:
             self._remember(attempt.score)
         return self._result(t0, stamp, attempt.status, attempt.pose, message,
                             covariance=attempt.covariance, score=attempt.score, predicted=pred,
-                            mode='tracked', localization=glob, confidence=attempt.confidence,
+                            mode=TRACKED, localization=glob, confidence=attempt.confidence,
                             evidence=attempt.evidence)
 
     def _adopt(self, t0: float, stamp: float, glob: Localization, message: str,
@@ -400,9 +397,9 @@ class Tracker:
         self._recent.clear()
         self._remember(glob.score)
         self.relocalizations += 1
-        return self._result(t0, stamp, 'ok', glob.pose, message + glob.message,
+        return self._result(t0, stamp, OK, glob.pose, message + glob.message,
                             covariance=glob.covariance, score=glob.score, node=glob.node,
-                            predicted=pred, mode='relocalized', localization=glob,
+                            predicted=pred, mode=RELOCALIZED, localization=glob,
                             confidence=glob.confidence, evidence=glob.evidence)
 
     def _remember(self, score: float) -> None:
@@ -413,7 +410,7 @@ class Tracker:
                     pred: Pose2 | None = None, pred_cov: np.ndarray | None = None) -> TrackResult:
         """Localize ``query`` globally; an ``ok`` answer becomes the track."""
         glob = self.localizer.localize_query(query)
-        if glob.status == 'ok':
+        if glob.status == OK:
             where = ''
             if pred is not None:
                 m2 = mahalanobis2(glob.pose, pred, pred_cov + glob.covariance)
@@ -424,7 +421,7 @@ class Tracker:
         return self._result(t0, stamp, glob.status, glob.pose if glob.pose is not None else pred,
                             f'{why}global localization {glob.status}: {glob.message}',
                             covariance=glob.covariance, score=glob.score, node=glob.node,
-                            predicted=pred, mode='lost', localization=glob,
+                            predicted=pred, mode=LOST, localization=glob,
                             confidence=glob.confidence, evidence=glob.evidence)
 
     def _miss(self) -> None:
@@ -435,7 +432,7 @@ class Tracker:
             self._recent.clear()
 
     @staticmethod
-    def _result(t0: float, stamp: float, status: str, pose: Pose2 | None, message: str,
+    def _result(t0: float, stamp: float, status: Status, pose: Pose2 | None, message: str,
                 **kwargs) -> TrackResult:
         return TrackResult(status=status, pose=pose, stamp=stamp, message=message,
                            latency_ms=(time.perf_counter() - t0) * 1e3, **kwargs)
@@ -447,4 +444,4 @@ def _laser_covariance(cov: np.ndarray, base_yaw: float, laser_on_base: Pose2) ->
     return lever_arm_covariance(cov, off)
 
 
-__all__ = ['MODES', 'STATUSES', 'TrackResult', 'Tracker']
+__all__ = ['STATUSES', 'TRACK_MODES', 'TrackResult', 'Tracker']

@@ -184,9 +184,10 @@ def test_a_wrong_pose_has_the_evidence_against_it(depot):
     right = loc.localize_query(query)
     best = next(h for h in right.candidates if h.check is not None)
     x, y, yaw = best.laser_pose
-    wrong = dataclasses.replace(best, laser_pose=(x + 1.5, y, yaw + math.radians(20.0)),
-                                check=None, found_by=set())
-    loc.verify(query, [wrong])
+    moved = dataclasses.replace(best, laser_pose=(x + 1.5, y, yaw + math.radians(20.0)),
+                                check=None)
+    wrong = loc.verify(query, [moved])[0]
+    assert moved.check is None and wrong.check is not None        # a value: verify returns it
     ev = loc.evidence(query, wrong, rival=best.score)
     p = CONFIDENCE_MODEL.probability(feature_values(ev))
     assert ev.margin < 0 and ev.hit < 0.5 and ev.through > 0.2

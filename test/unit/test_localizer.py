@@ -338,9 +338,9 @@ def test_verdict_status_policy():
     assert judge([best, _verified((0.0, 0.0, 0.5), 0.8)])[0] == 'ambiguous'
     status, msg, _ = judge([_verified((0.0, 0.0, 0.0), cfg.min_score - 0.01)])
     assert status == 'failed' and 'too little' in msg
-    through = _verified((0.0, 0.0, 0.0), 0.8)
-    through.check = BeamCheck(consistent=0.5, contradicting=cfg.max_contradicting + 0.01,
-                              short=0.0)
+    through = dataclasses.replace(
+        _verified((0.0, 0.0, 0.0), 0.8),
+        check=BeamCheck(consistent=0.5, contradicting=cfg.max_contradicting + 0.01, short=0.0))
     status, msg, _ = judge([through])
     assert status == 'failed' and 'through walls' in msg
     # uncertainty beyond the tolerance along some direction: ambiguous, within it: ok
