@@ -43,7 +43,7 @@ from ..evaluation.plotting import plot_reliability, plot_replay
 from ..evaluation.replay import ResultRow, summarize, within_success
 from ..io.carmen import log_scan_records
 from ..io.sensors import EVERYDAY_SENSORS
-from ..localization.localizer import GlobalLocalizer, Hypothesis, Localization
+from ..localization.localizer import AMBIGUOUS, GlobalLocalizer, Hypothesis, Localization, OK
 from ..mapping.index import build_index
 from ..mapping.map_io import load_map_yaml
 from ..transforms import Pose2
@@ -128,7 +128,7 @@ def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> s
     degenerate geometry / a confidence below ``min_confidence``; failed: explains too little / a
     confidence below one half).
     """
-    if loc.status == 'ok' and within_success(loc.pose, truth):
+    if loc.status == OK and within_success(loc.pose, truth):
         return None
     cands = loc.candidates
     if not cands:
@@ -141,7 +141,7 @@ def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> s
         return f'right one refined, not verified ({loc.status})'
     if not within_success(loc.pose, truth):
         return f'ranked below a wrong pose ({loc.status})'
-    if loc.status == 'ambiguous':
+    if loc.status == AMBIGUOUS:
         if loc.message.startswith('degenerate'):
             return 'right but ambiguous: degenerate geometry'
         if loc.message.startswith('low confidence'):
@@ -180,7 +180,7 @@ def run_set(localizer, scans, truth: dict, breakdown: bool = True) -> SetRun:
         rows.append(ResultRow.from_localization(scan.stamp, loc, gt))
         if gt is None:
             continue
-        if loc.status == 'ok' and within_success(loc.pose, gt):
+        if loc.status == OK and within_success(loc.pose, gt):
             covered.append(_coverage(loc.covariance, loc.pose, gt))
             if breakdown:
                 spectral += any('spectral' in h.found_by and _hypothesis_right(localizer, h, gt)

@@ -23,7 +23,7 @@ from ..io.bag_records import ScanRecord
 from ..io.carmen import build_map, CarmenLog, log_scan_records, read_carmen_log
 from ..io.sensors import EVERYDAY_SENSORS, SensorLimits
 from ..io.simulate import simulate
-from ..localization.localizer import GlobalLocalizer, Localization
+from ..localization.localizer import GlobalLocalizer, Localization, OK
 from ..mapping.map_io import load_map_yaml, OccupancyMap, save_map_yaml
 from ..transforms import Pose2
 
@@ -90,7 +90,7 @@ class Answer:
 
     @property
     def ok(self) -> bool:
-        return self.loc.status == 'ok'
+        return self.loc.status == OK
 
 
 def foreign(a: str, b: str) -> bool:

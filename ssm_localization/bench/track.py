@@ -42,7 +42,7 @@ from ..evaluation.replay import replay_scans, summarize
 from ..evaluation.tracking import summarize_track, track_scans, TrackSummary
 from ..io.sequences import (KIDNAP_AFTER, KIDNAP_BEFORE, kidnap_sequence, log_sequence,
                             ScanSequence, splice_kidnaps)
-from ..localization.localizer import GlobalLocalizer
+from ..localization.localizer import GlobalLocalizer, OK
 from ..localization.tracker import Tracker
 from ..mapping.index import build_index
 
@@ -109,7 +109,7 @@ def _single(localizer: GlobalLocalizer, seq: ScanSequence, tracked) -> str:
     rows = replay_scans(localizer, seq.scans, dict(zip((s.stamp for s in seq.scans), seq.truth)),
                         progress=False)
     s = summarize(rows)
-    alone = [k for k, r in enumerate(rows) if r.status != 'ok']
+    alone = [k for k, r in enumerate(rows) if r.status != OK]
     kept = sum(tracked[k].right for k in alone)
     return (f'  single-scan: success {s.success_rate:.1%} precision {s.precision:.2%}, latency '
             f'p50 {s.latency_p50_ms:.0f} p95 {s.latency_p95_ms:.0f} ms; {len(alone)} scans not '

@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from ..files.writing import atomic_files, check_output_file
+from ..localization.localizer import AMBIGUOUS, FAILED, OK
+from ..localization.tracker import RELOCALIZED
 from ..mapping.topology import NODE_KIND_NAMES
 from ..transforms import apply
 
@@ -77,7 +79,7 @@ def plot_replay(index, rows, path, title: str = '') -> None:
     plt, fig, ax, _ = _map_figure(index.map, 9, 0.5)
     ax.scatter(index.node_xy[:, 0], index.node_xy[:, 1], s=6, c='tab:blue', alpha=0.5,
                label='nodes')
-    colors = {'ok': 'tab:green', 'ambiguous': 'tab:orange', 'failed': 'tab:red'}
+    colors = {OK: 'tab:green', AMBIGUOUS: 'tab:orange', FAILED: 'tab:red'}
     gt = np.array([(r.gt_x, r.gt_y) for r in rows if r.has_truth])
     if len(gt):
         ax.scatter(gt[:, 0], gt[:, 1], s=28, facecolors='none', edgecolors='k',
@@ -132,7 +134,7 @@ def plot_track(grid, rows, path, kidnaps=(), title: str = '') -> None:
     ax.legend(loc='upper right', fontsize=8)
     k = np.arange(len(rows))
     err = np.hypot(gt[:, 0] - [r.x for r in rows], gt[:, 1] - [r.y for r in rows])
-    ok = np.array([r.status == 'ok' for r in rows])
+    ok = np.array([r.status == OK for r in rows])
     ax_err.semilogy(k[ok], np.maximum(err[ok], 1e-3), '.', color='tab:green', ms=3, label='ok')
     ax_err.semilogy(k[~ok], np.maximum(np.nan_to_num(err[~ok], nan=1e-3), 1e-3), 'x',
                     color='tab:orange', ms=4, label='not ok')
@@ -144,7 +146,7 @@ def plot_track(grid, rows, path, kidnaps=(), title: str = '') -> None:
     for a in (ax_err, ax_lat):
         for j in kidnaps:
             a.axvline(j, color='tab:purple', lw=0.8, ls='--')
-        for j in k[[r.mode == 'relocalized' for r in rows]]:
+        for j in k[[r.mode == RELOCALIZED for r in rows]]:
             a.axvline(j, color='tab:blue', lw=0.4, alpha=0.5)
         a.set_xlim(-1, len(rows))
     ax_err.legend(loc='upper right', fontsize=7)

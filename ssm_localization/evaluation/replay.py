@@ -12,7 +12,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..files.writing import atomic_files
-from ..localization.localizer import GlobalLocalizer, Localization
+from ..localization.localizer import GlobalLocalizer, Localization, OK
 from ..transforms import Pose2, wrap_angle
 
 #: success: status ok and within these bounds of the ground truth
@@ -90,12 +90,12 @@ class ResultRow:
     @property
     def right(self) -> bool:
         """Answered ``ok`` and within the success bounds of the ground truth."""
-        return self.status == 'ok' and self.has_truth and self.correct
+        return self.status == OK and self.has_truth and self.correct
 
     @property
     def wrong(self) -> bool:
         """Answered ``ok`` but outside the success bounds of the ground truth."""
-        return self.status == 'ok' and self.has_truth and not self.correct
+        return self.status == OK and self.has_truth and not self.correct
 
 
 @dataclass(frozen=True)
@@ -134,7 +134,7 @@ def summarize(rows: Sequence[ResultRow]) -> Summary:
     rows = [r for r in rows if r.has_truth]
     if not rows:
         raise ValueError('no scan with ground truth to score')
-    ok = [r for r in rows if r.status == 'ok']
+    ok = [r for r in rows if r.status == OK]
     correct = [r for r in ok if r.correct]
     err = np.array([r.errors() for r in ok]) if ok else np.full((1, 3), np.nan)
     _, ambiguous, failed = status_counts(rows)

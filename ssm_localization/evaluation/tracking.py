@@ -21,7 +21,8 @@ from tqdm import tqdm
 
 from .replay import latency_percentiles, ResultRow, status_counts, summarize, Summary
 from ..io.bag_records import stamp_to_ns
-from ..localization.tracker import Tracker, TrackResult
+from ..localization.localizer import OK
+from ..localization.tracker import RELOCALIZED, Tracker, TrackResult
 from ..transforms import Pose2, pose_at_time
 
 #: odometry further than this from a scan's stamp (s) is not used (the node's ``odom_max_age``)
@@ -139,7 +140,7 @@ def recovery_after(rows: Sequence[TrackRow], start: int, use_truth: bool = True)
     wrong = 0
     for k in range(start, len(rows)):
         r = rows[k]
-        if r.status != 'ok':
+        if r.status != OK:
             continue
         if not use_truth or not r.has_truth or r.correct:
             return Recovery(start, k - start + 1, wrong)
@@ -169,6 +170,6 @@ def summarize_track(rows: Sequence[TrackRow],
         first_fix=recovery_after(rows, 0, use_truth),
         recoveries=[recovery_after(rows, k, use_truth) for k in starts],
         tracked=sum(r.mode == 'tracked' for r in rows),
-        relocalized=sum(r.mode == 'relocalized' and r.status == 'ok' for r in rows),
+        relocalized=sum(r.mode == RELOCALIZED and r.status == OK for r in rows),
         latency=latency_percentiles([r.latency_ms for r in rows]),
         tracked_latency=latency_percentiles([r.latency_ms for r in rows if r.mode == 'tracked']))

@@ -15,10 +15,11 @@ import math
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from ssm_localization.localization.localizer import AMBIGUOUS, FAILED, OK
 from ssm_localization.ros.conversions import time_msg
 
-LEVELS = {'ok': DiagnosticStatus.OK, 'ambiguous': DiagnosticStatus.WARN,
-          'failed': DiagnosticStatus.ERROR}
+LEVELS = {OK: DiagnosticStatus.OK, AMBIGUOUS: DiagnosticStatus.WARN,
+          FAILED: DiagnosticStatus.ERROR}
 MAP_STATES = ('no map', 'indexing', 'ready')
 
 
@@ -48,7 +49,7 @@ def localization_status(node_name: str, fqn: str, map_state: str, loc: Any = Non
         pose = loc.pose if loc.pose is not None else (math.nan,) * 3
         status.message = (f'{loc.status}: x={pose[0]:.3f} y={pose[1]:.3f} yaw={pose[2]:.4f} '
                           f'confidence={float(loc.confidence):.3f}'
-                          if loc.status == 'ok' else f'{loc.status}: {loc.message}')
+                          if loc.status == OK else f'{loc.status}: {loc.message}')
         values = {'status': loc.status, 'confidence': _number(loc.confidence, '.4f'),
                   'score': _number(loc.score, '.4f'),
                   'latency_ms': _number(loc.latency_ms, '.1f'), 'node': str(int(loc.node)),
