@@ -6,21 +6,28 @@ Data sets (``--sets``):
   in free space, 360 beams over 360 deg, range noise sigma 10 mm;
 - ``depot_clutter``: 8 unmapped discs near the robot and 5 % random short ranges;
 - ``depot_fov180``: a 180 deg field of view;
-- ``intel``, ``aces``, ``fr079``: real scans; the map is built from the even-numbered scans of the
-  CARMEN log, the queries are the odd-numbered scans (ground truth: the corrected poses);
-- ``intel_clutter``, ``aces_clutter``, ``fr079_clutter``: simulated scans with clutter on those
-  real-built maps (maps the defaults were not tuned on).
-Every set runs with the same defaults (no per-set parameter). The defaults were chosen on the
-``TUNING_SETS`` (depot and its variants, Intel, ACES); the others (the turtlebot maps, Freiburg
-079, the clutter sets on the real-built maps) are a validation split that was only measured. Each
-line says which split its set belongs to, and the run ends with both splits pooled.
+- ``intel``, ``aces``, ``fr079``, ``csail``, ``fhw``, ``edmonton``: real scans; the map is built
+  from the even-numbered scans of the CARMEN log, the queries are the odd-numbered scans (ground
+  truth: the corrected poses);
+- ``intel_clutter``, ``aces_clutter``, ``fr079_clutter`` (``all``): simulated scans with clutter
+  on those real-built maps.
+Every set runs with the same defaults (no per-set parameter). The ``TUNING_SETS`` are those the
+defaults were chosen on (the localizer's: depot and its variants, Intel, ACES) or the confidence
+was calibrated on (Intel, ACES, FHW, depot, the empty room); every other set is a validation set
+that was only measured. Each line says which split its set belongs to, and the run ends with
+both splits pooled.
 
 Prints per set: counts of ok / ambiguous / failed, success (ok and within 0.5 m / 5 deg),
 precision (right / answered ok), the median position error of the ok answers, the covariance
 coverage (right ok answers whose position error lies inside the reported 2-sigma ellipse), latency
 p50 / p95, and where the misses were lost (:func:`miss_stage`); ``--paper`` adds the plain paper
 pipeline, ``--peer`` the exhaustive correlative search of ``bench/peer.py`` on the same queries,
-with the ratio of their p95 latencies.
+with the ratio of their p95 latencies. ``--sensors`` localizes every set again through everyday
+sensors (``io/sensors.py``: range cut to 3.5 / 12 m, field of view cut to 90 / 120 deg);
+``--foreign`` localizes ``--foreign-n`` scans of every place on the map of every other place
+(:func:`run_foreign`: negative controls, never right) and prints the ``ok`` rates. At the end the
+reliability of the reported confidence per split (every answer of the run, foreign ones
+included), drawn by ``--reliability PNG``.
 """
 from __future__ import annotations
 

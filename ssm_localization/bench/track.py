@@ -46,7 +46,7 @@ from ..localization.localizer import GlobalLocalizer, OK
 from ..localization.tracker import Tracker
 from ..mapping.index import build_index
 
-#: the issue's targets: success, precision, scans to a fix, latency p50 / p95 (ms)
+#: the targets: success, precision, scans to a fix, latency p50 / p95 (ms)
 TARGET_SUCCESS = 0.98
 TARGET_PRECISION = 0.999
 TARGET_FIX_SCANS = 3

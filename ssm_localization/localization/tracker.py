@@ -20,17 +20,21 @@ Per scan (``Tracker.track``):
    most ``max_position_std`` and no rival in the window, distinct (the localizer's
    ``distinct_xy`` / ``distinct_yaw``, and along a direction the scan determines), scores within
    ``rival_margin`` and fits the prediction about as well (``rival_prior_chi2``; among poses the
-   scan cannot tell apart the prediction picks);
-   ``ambiguous`` for the last two (the track goes on);
+   scan cannot tell apart the prediction picks), and the calibrated confidence of the pose's
+   evidence (``evidence.py``, ``confidence.py``: judged as a global answer is, with the fused
+   covariance and the rivals verified in the window) reaches the localizer's
+   ``min_confidence``; ``ambiguous`` for a rival, a weak position or a confidence of at least
+   one half below that (the track goes on); ``failed`` for a confidence below one half (step 7);
 6. cross-check a doubtful ``ok``: a score under ``check_score`` and ``check_drop`` below the
    median of the last ones (the fit a scan gets in a look-alike corridor after a kidnap), or a
    prediction too uncertain for the window (no odometry): the localizer's correlative search
    over the whole map looks for a better place; only if it finds one does the whole global
    pipeline run, and its ``ok`` answer takes over;
-7. fall back: when verification fails (a kidnap, a wrong start, a collapsed fit) the same scan
-   goes through global localization: an ``ok`` there is a relocalization, anything else is
-   reported as such (never ``ok``) and counts as a miss; after ``max_misses`` misses in a row
-   the tracker is lost and localizes every scan globally until an ``ok``.
+7. fall back: when verification fails (a kidnap, a wrong start, a collapsed fit, a confidence
+   below one half) the same scan goes through global localization: an ``ok`` there is a
+   relocalization, anything else is reported as such (never ``ok``) and counts as a miss; after
+   ``max_misses`` misses in a row the tracker is lost and localizes every scan globally until
+   an ``ok``.
 Before the first fix every scan is localized globally; ``set_prior`` (``initialpose``) starts a
 track from a given pose, which the next scan verifies like any other prediction.
 """

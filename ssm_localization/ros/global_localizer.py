@@ -80,7 +80,7 @@ from ssm_localization.ros.tracking import TrackSession
 from std_srvs.srv import Empty, Trigger
 from visualization_msgs.msg import MarkerArray
 
-MODES = ('on_demand', 'continuous', 'track')
+NODE_MODES = ('on_demand', 'continuous', 'track')   # values of the mode parameter
 MARKER_PERIOD = 1.0          # seconds between marker updates in continuous mode
 DIAGNOSTICS_PERIOD = 1.0     # seconds between /diagnostics messages while active
 MAX_QUEUED_CALLS = 64        # service calls waiting for the next scan at once; more: refused
@@ -135,8 +135,9 @@ class GlobalLocalizerNode(LifecycleNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('global_localizer', **kwargs)
         answer_invalid_transitions(self)
-        self._guard = ParameterGuard(self, localizer_parameters(), DYNAMIC, {'mode': MODES},
-                                     partial(configured_state, self), config_problem)
+        self._guard = ParameterGuard(self, localizer_parameters(), DYNAMIC,
+                                     {'mode': NODE_MODES}, partial(configured_state, self),
+                                     config_problem)
         values = self._guard.declare()
         self._group = ReentrantCallbackGroup()
         self._mailbox = ScanMailbox()

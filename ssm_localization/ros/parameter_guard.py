@@ -1,5 +1,5 @@
 """
-Validation of the nodes' parameters at the boundary (issue 13, item 1).
+Validation of the nodes' parameters at the boundary.
 
 Every parameter is declared with a :class:`ParameterDescriptor` that carries its range (rclpy
 refuses out-of-range values, NaN and infinities included, at start-up and at run time) and an

@@ -8,7 +8,7 @@ The node runs as its own process (the installed console script, or ``python -m``
 so its RSS is honest; this driver publishes the bag's map once (latched) and its scans in a loop
 at a fixed rate, counts the poses the node publishes on ``global_pose``, and reads the node's
 ``VmRSS`` from /proc every ``sample_s`` seconds. After ``warmup_s`` the RSS must stay within
-``flat_tolerance`` of its value at the end of the warm-up (the issue's target: 10 %).
+``flat_tolerance`` of its value at the end of the warm-up (10 % by default).
 """
 from __future__ import annotations
 

@@ -52,7 +52,7 @@ def test_replay_depot_sim(indexed):
 
 @pytest.mark.parametrize('bag', ['depot_sim_clutter', 'depot_sim_fov180'])
 def test_replay_depot_clutter_and_partial_fov(indexed, bag):
-    """The issue's two harder protocols: unmapped clutter (360 deg) and a 180 deg field of view."""
+    """The two harder protocols: unmapped clutter (360 deg) and a 180 deg field of view."""
     rows, s = _replay(bag, LocalizerConfig(), indexed)
     assert s.n == 20
     wrong = [(r.stamp, round(math.hypot(r.x - r.gt_x, r.y - r.gt_y), 2)) for r in rows

@@ -1,5 +1,5 @@
 """
-Hostile input against global_localizer over real DDS (issue 13, items 1, 2 and 4).
+Hostile input against global_localizer over real DDS.
 
 Bad parameters at start and at run time, bursts of concurrent calls from several clients, corrupt
 and wrong index files, a map whose frame changes, a map swap. Every case: a clear answer, the node

@@ -1,8 +1,8 @@
 """
 IndexSource: index_file vs the map topic.
 
-(issue 13 item 4), with the real IndexBuilder thread and small stand-in maps (the node tests run
-the same rules over DDS with real indexes).
+The rules of ros/index_source.py, with the real IndexBuilder thread and small stand-in maps (the
+node tests run the same rules over DDS with real indexes).
 """
 from __future__ import annotations
 

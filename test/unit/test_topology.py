@@ -177,8 +177,8 @@ def test_a_resolution_off_in_its_8th_digit_gives_the_same_nodes(name):
     """
     Lengths are compared in cells with the settings rounded once.
 
-    No comparison flips when the resolution changes by far less than a cell (issue: the float32
-    resolution of a message).
+    No comparison flips when the resolution changes by far less than a cell (the case: the
+    float32 resolution of a map message).
     """
     occ = load_map_yaml(shared_data('maps', f'{name}.yaml'))
     base = build_topology(occ)
