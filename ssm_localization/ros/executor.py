@@ -30,8 +30,10 @@ def spin(node_factory: Callable[[], Node], args: list[str] | None = None,
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception as exc:  # noqa: BLE001 - re-raised unless a signal or bad parameters
-        if node is None and not rclpy.ok():
-            return 0        # SIGINT / SIGTERM while the node was being made: the context is gone
+        if not rclpy.ok():
+            # SIGINT / SIGTERM while the node was being made, or between rclpy.ok() and
+            # spin_once ("context is not valid"): the context is gone, a clean exit
+            return 0
         if node is None and isinstance(exc, (ValueError, ParameterException)):
             print(f'error: {exc}', file=sys.stderr)              # bad parameters
             return 2
