@@ -91,9 +91,10 @@ class ConfidenceModel:
 #: fitted by ``scripts/learn_confidence.py`` on the calibration split
 #: (``config/confidence_model.yaml``, 2026-11-25: 3203 answers the rules accept, 2654 right)
 CONFIDENCE_MODEL = ConfidenceModel(
-    features=('through', 'short', 'missing', 'on_wall',
-              'unknown', 'unexplained_runs', 'explained', 'margin',
-              'log_position_std', 'log_yaw_std', 'log_scan_length', 'log_extent'),
+    features=('through', 'short', 'missing',
+              'on_wall', 'unknown', 'unexplained_runs',
+              'explained', 'margin', 'log_position_std',
+              'log_yaw_std', 'log_scan_length', 'log_extent'),
     mean=(
         0.061737884173253176, 0.059048039330351985, 0.040979810594234826,
         0.9465888174625001, 0.06542114338384186, 0.012606268610343125,
@@ -134,3 +135,45 @@ CONFIDENCE_MODEL = ConfidenceModel(
         (7.793746886497953, 0.9995951417004049),
     ),
     split='calibration: intel, aces, fhw, depot, empty_room')
+
+#: the tracker's, fitted by ``scripts/learn_confidence.py --tracker`` on tracked answers
+#: (``config/track_confidence_model.yaml``, 2026-11-25: 6324 answers the rules accept, 6298 right)
+TRACK_CONFIDENCE_MODEL = ConfidenceModel(
+    features=('through', 'short', 'missing',
+              'on_wall', 'unknown', 'unexplained_runs',
+              'explained', 'margin', 'log_position_std',
+              'log_yaw_std', 'log_scan_length', 'log_extent',
+              'log_prior_distance', 'log_scan_position_std'),
+    mean=(
+        0.049270500349790254, 0.052451919834322, 0.015122285473329734,
+        0.9614294518387902, 0.06185383991705964, 0.002486480853058795,
+        0.9004441647240262, 0.843160011069538, -2.795295535394898,
+        -4.197615600478226, 2.2723437614384228, 1.8315737007968664,
+        0.6291685600033478, -2.792518450303263,
+    ),
+    scale=(
+        0.0470807284026571, 0.07824279859604281, 0.037465107550036986,
+        0.07567679863887453, 0.06450859353436818, 0.01993428778957639,
+        0.06842704768333532, 0.1343508249867151, 0.1569955007143703,
+        0.40671694840900974, 0.48780297205941797, 0.6743521327832728,
+        0.2819589405964253, 0.17050135711483297,
+    ),
+    weights=(
+        0.10709450441963987, 0.08372168592529557, -0.46772322205784694,
+        -0.18250370712567618, -0.5296912422795743, 0.1663793011305414,
+        0.2966920373980131, 0.5895653161113029, 0.1373819148631493,
+        -0.7670957807547327, 0.044732564063761374, 0.49765954788645,
+        -0.5400625151767315, 0.3548109594062794,
+    ),
+    intercept=7.241753994711809,
+    refused={'implausible': 0.0, 'rival': 0.5, 'degenerate': 0.5},
+    calibration=(
+        (0.4803443394571287, 0.9025974025974026),
+        (1.9436359494154616, 0.9224137931034483),
+        (2.569401863139294, 0.9481132075471698),
+        (4.117708210603638, 0.9954128440366973),
+        (5.019295488706429, 0.9964622641509434),
+        (6.2327753983881795, 0.997538048343778),
+        (8.548272856577288, 0.9997960016319869),
+    ),
+    split='tracker calibration: intel, aces, fhw')

@@ -20,6 +20,7 @@ import numpy as np
 
 from .bag_records import ScanRecord
 from .carmen import CarmenLog, log_scan_records
+from .sensors import SensorLimits
 from ..transforms import compose, inverse, Pose2
 
 #: where the odometry frame's origin lies in the map frame (any rigid offset will do)
@@ -63,12 +64,12 @@ class ScanSequence:
         """
         Return the sequence with every reading beyond ``max_range`` made a no-return (``inf``).
 
-        A shorter laser: in long corridors a scan no longer sees the far walls that place it.
+        A shorter laser (``range_max`` says so, as its driver would): in long corridors a scan
+        no longer sees the far walls that place it.
         """
-        scans = [dataclasses.replace(
-            s, ranges=np.where(s.ranges > max_range, np.inf, s.ranges).astype(s.ranges.dtype))
-            for s in self.scans]
-        return dataclasses.replace(self, scans=scans, name=f'{self.name}_{max_range:g}m')
+        limits = SensorLimits(f'{max_range:g}m', max_range=max_range)
+        return dataclasses.replace(self, scans=[limits.apply(s) for s in self.scans],
+                                   name=f'{self.name}_{max_range:g}m')
 
     def by_stamp(self) -> tuple[dict[float, Pose2], dict[float, Pose2]]:
         """Return ``(odom, ground truth)`` keyed by scan stamp, as a bag holds them."""

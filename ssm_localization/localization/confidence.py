@@ -4,7 +4,9 @@
 The model (``config/confidence.py``) is a logistic regression on the features below, fitted by
 ``scripts/learn_confidence.py`` on labelled answers of the calibration buildings and checked on
 buildings it never saw (``bench localize`` prints the reliability of its probabilities and
-draws the diagram). A status of ``ok`` needs at least ``LocalizerConfig.min_confidence``.
+draws the diagram). A status of ``ok`` needs at least ``LocalizerConfig.min_confidence``. The
+tracker's poses have a model of their own (``TRACK_CONFIDENCE_MODEL``): the same evidence plus
+how far the scan's own pose lies from the motion prediction, fitted on tracked answers.
 """
 from __future__ import annotations
 
@@ -39,6 +41,8 @@ def feature_values(ev: Evidence) -> dict[str, float]:
         'log_returns': math.log(max(ev.returns, 1)),
         'log_scan_length': math.log(max(ev.scan_length, 0.5)),
         'log_extent': math.log(max(ev.extent, 0.1)),
+        'log_prior_distance': math.log1p(ev.prior_distance),      # NaN for a global answer
+        'log_scan_position_std': math.log(max(ev.scan_position_std, 1e-3)),
     }
 
 
@@ -47,6 +51,6 @@ def confidence(ev: Evidence | None, model: ConfidenceModel) -> float:
     if ev is None:
         return 0.0
     values = feature_values(ev)
-    if not all(math.isfinite(v) for v in values.values()):
+    if not all(math.isfinite(values[f]) for f in model.features):
         return 0.0
     return model.probability(values)

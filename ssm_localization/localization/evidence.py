@@ -10,7 +10,8 @@ A pose is trusted for what the scan and the map say about it, not for how it was
   people, chairs -- seldom makes);
 - how well the pose is determined (its covariance) and how far ahead of the best distinct rival
   place it is (the margin of their scores);
-- how much there is of it (returns among the checked beams).
+- how much there is of it (returns among the checked beams);
+- for a tracked pose, how far the scan's own pose lies from the motion prediction.
 ``confidence.py`` turns these into a calibrated probability that the pose is right.
 """
 from __future__ import annotations
@@ -53,6 +54,10 @@ class Evidence:
     returns: int             # beams with a finite reading among those checked
     scan_length: float       # metres of surface the scan sees (gaps between linked endpoints)
     extent: float            # metres: 90th percentile of the range of its spatially even points
+    prior_distance: float = math.nan   # tracked poses: the scan's own pose from the motion
+    #                                    prediction, in standard deviations (Mahalanobis)
+    scan_position_std: float = math.nan  # the scan's own pose, before a tracker fuses in the
+    #                                      prediction: metres along its least determined direction
 
     def as_dict(self) -> dict[str, float]:
         """Return the fields by name (for CSV columns and diagnostics)."""

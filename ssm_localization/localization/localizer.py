@@ -618,7 +618,8 @@ class GlobalLocalizer:
                         missing=check.missing / max(check.beams, 1), on_wall=on_wall,
                         unknown=unknown, unexplained_runs=runs, explained=h.explained,
                         margin=h.score - rival, position_std=position_std, yaw_std=yaw_std,
-                        returns=check.returns, scan_length=length, extent=extent)
+                        returns=check.returns, scan_length=length, extent=extent,
+                        scan_position_std=position_std)
 
     def report_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:
         """Return the Gauss-Newton laser covariance, scaled and floored, propagated to the base."""

@@ -53,6 +53,7 @@ from .fusion import fuse_weak, lever_arm_covariance, mahalanobis2
 from .localizer import (AMBIGUOUS, distinct, FAILED, GlobalLocalizer, Hypothesis, Localization,
                         OK, position_std, Query, Status, STATUSES)
 from .motion import check_pose, Increment, predict
+from ..config.confidence import ConfidenceModel, TRACK_CONFIDENCE_MODEL
 from ..config.tracking import TrackerConfig
 from ..transforms import apply, Pose2, wrap_angle
 
@@ -123,12 +124,14 @@ class Tracker:
     Not thread-safe: one caller feeds it scans in order.
     """
 
-    def __init__(self, localizer: GlobalLocalizer, config: TrackerConfig | None = None):
+    def __init__(self, localizer: GlobalLocalizer, config: TrackerConfig | None = None,
+                 confidence_model: ConfidenceModel = TRACK_CONFIDENCE_MODEL):
         if not isinstance(localizer, GlobalLocalizer):
             raise ValueError('the tracker needs a GlobalLocalizer built on a map index '
                              f'(got {type(localizer).__name__}: no map?)')
         self.localizer = localizer
         self.config = config or TrackerConfig()
+        self.confidence_model = confidence_model
         self._pose: Pose2 | None = None
         self._cov = np.eye(3)
         self._odom: Pose2 | None = None
@@ -282,9 +285,11 @@ class Tracker:
         others = [h.score for h in verified if h is not best
                   and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)]
         evidence = loc.evidence(query, fused, max(others, default=0.0))
-        evidence = replace(evidence, **dict(zip(('position_std', 'yaw_std'),
-                                                covariance_stds(cov))))
-        conf = confidence(evidence, loc.confidence_model)
+        stds = covariance_stds(cov)
+        evidence = replace(evidence, position_std=stds[0], yaw_std=stds[1],
+                           prior_distance=math.sqrt(best_m2))
+        conf = confidence(evidence, self.confidence_model)
+        refused = min(conf, 0.5)        # the rules refuse: not more likely right than wrong
         common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated,
                   'confidence': conf, 'evidence': evidence}
         rivals = [h for h, m2 in contenders if h is not best
@@ -294,17 +299,19 @@ class Tracker:
                   > cfg.rival_chi2]
         if rivals:
             return _Attempt(AMBIGUOUS, f'{len(rivals) + 1} distinct poses near the prediction '
-                                       f'fit about equally well', **common)
+                                       f'fit about equally well',
+                            **dict(common, confidence=refused))
         std_xy = position_std(cov)
         if std_xy > cfg.max_position_std:
             return _Attempt(AMBIGUOUS, f'position std {std_xy:.2f} m along the weakest '
-                                       f'direction even with the prediction', **common)
+                                       f'direction even with the prediction',
+                            **dict(common, confidence=refused))
         facts = (f'explained {best.explained:.0%}, through walls {fused.contradicting:.0%}, '
                  f'position std {std_xy * 1e3:.0f} mm, confidence {conf:.3f}')
-        if conf < 0.5:
+        if conf < cfg.lost_confidence:
             return _Attempt(FAILED, f'the tracked pose is more likely wrong than right: {facts}',
                             **common)
-        if conf < lc.min_confidence:
+        if conf < cfg.min_confidence:
             return _Attempt(AMBIGUOUS, f'tracked with low confidence: {facts}', **common)
         return _Attempt(OK, f'tracked: {facts}', **common)
 

@@ -14,7 +14,8 @@ from helpers import BAGS, REPO
 import numpy as np
 import pytest
 from ssm_localization import build_index, GlobalLocalizer, read_bag
-from ssm_localization.config.confidence import CONFIDENCE_MODEL, ConfidenceModel
+from ssm_localization.config.confidence import (CONFIDENCE_MODEL, ConfidenceModel,
+                                                TRACK_CONFIDENCE_MODEL)
 from ssm_localization.evaluation.calibration import fit_confidence, isotonic_knots, reliability
 from ssm_localization.files.yaml_input import load_yaml_file
 from ssm_localization.localization.confidence import feature_values
@@ -139,11 +140,15 @@ def test_model_needs_consistent_fields():
         ConfidenceModel(('a',), (0.0,), (1.0,), (1.0,), 0.0, refused={'rival': 2.0})
 
 
-def test_the_shipped_model_is_the_calibrated_one():
-    """CONFIDENCE_MODEL is config/confidence_model.yaml, written by scripts/learn_confidence.py."""
-    doc = load_yaml_file(REPO / 'config' / 'confidence_model.yaml', 'confidence model')
+@pytest.mark.parametrize('model, path', [
+    (CONFIDENCE_MODEL, 'confidence_model.yaml'),
+    (TRACK_CONFIDENCE_MODEL, 'track_confidence_model.yaml'),
+])
+def test_the_shipped_models_are_the_calibrated_ones(model, path):
+    """The models are config/*confidence_model.yaml, written by scripts/learn_confidence.py."""
+    doc = load_yaml_file(REPO / 'config' / path, 'confidence model')
     fitted = doc['model']
-    shipped = dataclasses.asdict(CONFIDENCE_MODEL)
+    shipped = dataclasses.asdict(model)
     assert list(fitted['features']) == list(shipped['features'])
     for key in ('mean', 'scale', 'weights'):
         assert fitted[key] == pytest.approx(list(shipped[key]), rel=1e-9)
