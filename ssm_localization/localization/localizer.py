@@ -20,8 +20,11 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
 7. verification (``verify.py``): ray casting; beams seeing through walls count against a pose;
 8. the answer: ``failed`` when the best pose explains too little of the scan, ``ambiguous`` when a
    distinct pose scores within ``ambiguity_margin`` or the geometry leaves the position
-   undetermined beyond ``max_position_std``, else ``ok``; the covariance is the Gauss-Newton one,
-   scaled and floored (``covariance_scale``, ``min_position_std``, ``min_yaw_std``).
+   undetermined beyond ``max_position_std``; otherwise the evidence of the pose (``evidence.py``,
+   the margin measured against the best distinct rival, ray-cast for it) gives the calibrated
+   confidence ``P(right | evidence)`` (``confidence.py``): ``ok`` from ``min_confidence``, else
+   ``ambiguous`` or (below one half) ``failed``; the covariance is the Gauss-Newton one, scaled
+   and floored (``covariance_scale``, ``min_position_std``, ``min_yaw_std``).
 ``paper_mode`` runs the paper's own pipeline instead: every node ranked by the spectral score of
 the query against its virtual scan, RANSAC + least squares on the ``top_n`` best, the largest
 vicinity score (eq. 10) wins, always ``ok``.
