@@ -468,6 +468,11 @@ class GlobalLocalizerNode(LifecycleNode):
         publish_tf = bool(self.get_parameter('publish_tf').value)
         result = self._run('tracking', lambda: session.track(
             scan.localizer, scan.args, msg.header.stamp, self._frame(scan.served), publish_tf))
+        if result is None:
+            self.get_logger().info('track: a scan not newer than the last one tracked '
+                                   '(delivered twice or out of order): skipped',
+                                   throttle_duration_sec=5.0)
+            return
         self._publish(result.as_localization(), scan, False)
         if result.mode != 'tracked':
             self.get_logger().info(f'track: {result.mode}, {result.status}: {result.message}',

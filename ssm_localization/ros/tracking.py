@@ -21,6 +21,10 @@ from ssm_localization.ros.odometry import MapOdomBroadcaster, OdometrySource
 from ssm_localization.transforms import Pose2
 
 
+CLOCK_RESET = 1.0
+"""A scan stamp this many seconds older than the last one tracked means the clock was reset."""
+
+
 class TrackSession:
     """One track at a time: scans in, :class:`TrackResult` out; thread-safe."""
 
@@ -33,6 +37,7 @@ class TrackSession:
         self._lock = threading.Lock()
         self._tracker: Tracker | None = None
         self._pending: tuple[Pose2, np.ndarray | None] | None = None
+        self._last_ns: int | None = None    # stamp of the last scan tracked
         self.count = 0            # scans tracked
 
     def _tracker_for(self, localizer: GlobalLocalizer) -> Tracker:
@@ -52,17 +57,25 @@ class TrackSession:
         return tracker
 
     def track(self, localizer: GlobalLocalizer, scan: Any, stamp: Any, map_frame: str,
-              publish_tf: bool = True) -> TrackResult:
+              publish_tf: bool = True) -> TrackResult | None:
         """
         Track one scan (anything with LaserScan fields) taken at ``stamp``.
 
         The odometry pose at ``stamp`` comes from :attr:`odometry`; with ``publish_tf`` the
-        map -> odom transform is sent (again) afterwards.
+        map -> odom transform is sent (again) afterwards. A scan that is not newer than the
+        last one tracked (the same scan delivered twice, or one out of order) is skipped:
+        None. A stamp more than :data:`CLOCK_RESET` s older than the last one is a clock that
+        was reset (a bag played again, a simulation restarted) and is tracked.
         """
+        ns = stamp_to_ns(stamp)
         odom = self.odometry.pose_at(stamp)
         with self._lock:
+            last = self._last_ns
+            if last is not None and last - CLOCK_RESET * 1e9 < ns <= last:
+                return None
             tracker = self._tracker_for(localizer)
-            result = tracker.track(scan, odom, stamp_to_ns(stamp) * 1e-9)
+            result = tracker.track(scan, odom, ns * 1e-9)
+            self._last_ns = ns
             self.count += 1
         if publish_tf and self.broadcaster is not None:
             self.broadcaster.update(result.pose if result.ok else None, odom, stamp, map_frame)

@@ -265,3 +265,29 @@ def test_map_to_odom_is_broadcast_as_amcl_does():
     assert sent[0].child_frame_id == 'odom'
     assert stamp_to_sec(sent[0].header.stamp) == pytest.approx(6.0)   # + transform_tolerance
     assert transform_pose(sent[1].transform) == pytest.approx(t)
+
+
+def test_a_scan_delivered_twice_is_tracked_once():
+    """The same stamp again (or one out of order) is skipped; a clock reset is tracked."""
+    from ssm_localization import build_index, GlobalLocalizer
+    from ssm_localization.config import TrackerConfig
+    from ssm_localization.evaluation.replay import match_truth
+    from ssm_localization.ros.tracking import CLOCK_RESET, TrackSession
+    data = read_bag(find_bag('intel_track'))
+    loc = GlobalLocalizer(build_index(data.map))
+    odom = match_truth([s.stamp for s in data.scans], data.odom)
+    buffer = OdometryBuffer(max_age=0.5)
+    session = TrackSession(TrackerConfig(), OdometrySource(buffer, 'odom', 'base_link', None),
+                           None, lambda line: None)
+
+    def track(k: int, stamp: float):
+        buffer.add(_odometry(odom[k], stamp))
+        return session.track(loc, data.scans[k], time_msg(stamp), 'map')
+    t0 = data.scans[0].stamp
+    assert track(0, t0).ok and session.count == 1
+    assert track(0, t0) is None and session.count == 1            # delivered twice
+    assert track(1, data.scans[1].stamp).ok and session.count == 2
+    late = data.scans[1].stamp - 0.5 * CLOCK_RESET
+    assert track(0, late) is None and session.count == 2          # out of order
+    reset = data.scans[1].stamp - CLOCK_RESET - 5.0                  # a bag played again
+    assert track(2, reset) is not None and session.count == 3
