@@ -24,8 +24,8 @@ import math
 import time
 
 import numpy as np
-from scipy import ndimage
 
+from ..mapping.distance import clamped_squared_distance
 from ..mapping.occupancy import OccupancyMap
 from ..transforms import wrap_angle
 
@@ -80,27 +80,35 @@ class CorrelativeGrid:
         self.depth = int(depth)
         self.max_range = float(max_range)
         occ = occ_map.occupied_mask(occupied_thresh)
-        dist = (ndimage.distance_transform_edt(~occ) * occ_map.resolution if occ.any()
-                else np.full(occ.shape, np.inf))
-        lik = _block_reduce(np.round(_SCALE * np.exp(-0.5 * (dist / sigma) ** 2))
-                            .astype(np.uint8), coarsen, np.max)
+        lik = _block_reduce(likelihood_grid(occ, occ_map.resolution, sigma), coarsen, np.max)
+        del occ
         free = _block_reduce(occ_map.free_mask(free_thresh), coarsen, np.any)
         self.height, self.width = lik.shape
         h, w = lik.shape
-        # every point of a scan taken from inside the map lands within `pad` cells of it
+        # Layout of the level grids, flat: rows of `_left` cells, the map row, `pad` cells. Every
+        # point of a scan taken from inside the map lands within `pad` cells of it, so a point
+        # right of the map reads the padding of its row and one left of the `_left` cells wraps
+        # into the padding of the row before (both 0); the `_left` columns and `_top` rows hold
+        # the windows of the coarser levels that reach into the map from the left and from
+        # below. Points further below or above fall off the flat array, and the look-ups clip
+        # them to its first or last cell (both 0). Exactly the values of a grid padded by `pad`
+        # all round, at (h + 2^depth) (w + 2^depth + pad) cells instead of (h + 2 pad) (w + 2 pad).
         self.pad = pad = (1 << self.depth) + int(math.ceil(self.max_range / self.resolution)) + 2
-        self._wp = w + 2 * pad
-        grid = np.zeros((h + 2 * pad, self._wp), np.uint8)
-        grid[pad:pad + h, pad:pad + w] = lik
-        anyfree = free.copy()
+        self._top = self._left = 1 << self.depth
+        self._wp = self._left + w + pad
+        grid = np.zeros((self._top + h, self._wp), np.uint8)
+        grid[self._top:, self._left:self._left + w] = lik
+        del lik
         self._levels = [grid.ravel()]
-        self._free = [anyfree]
         for k in range(1, self.depth + 1):
-            s = 1 << (k - 1)
-            grid = _window_max(grid, s)
-            anyfree = _window_max(anyfree, s)
+            grid = _window_max(grid, 1 << (k - 1))
             self._levels.append(grid.ravel())
-            self._free.append(anyfree)
+        # Windows of level k are only ever anchored at multiples of 2^k (the top level's tile
+        # the map, children split their parent), so whether a window holds a free cell is
+        # kept once per 2^k x 2^k block: 4/3 of a byte per cell for all levels together.
+        self._free = [free]
+        for k in range(1, self.depth + 1):
+            self._free.append(_block_reduce(self._free[-1], 2, np.any))
 
     # ------------------------------------------------------------------ geometry
     def _grid_yaws(self, yaws) -> np.ndarray:
@@ -235,11 +243,10 @@ class CorrelativeGrid:
         q = pts / self.resolution
         x = c[:, None] * q[None, :, 0] - s[:, None] * q[None, :, 1] + frac[:, 0:1] + 0.5
         y = s[:, None] * q[None, :, 0] + c[:, None] * q[None, :, 1] + frac[:, 1:2] + 0.5
-        pr = np.clip(np.floor(y).astype(np.int64) + rows[:, None], -self.pad, self.height
-                     + self.pad - 1)
-        pc = np.clip(np.floor(x).astype(np.int64) + cols[:, None], -self.pad, self.width
-                     + self.pad - 1)
-        vals = self._levels[0][(pr + self.pad) * self._wp + (pc + self.pad)]
+        pr = np.floor(y).astype(np.int64) + rows[:, None]
+        pc = np.floor(x).astype(np.int64) + cols[:, None]
+        inside = (pr >= 0) & (pr < self.height) & (pc >= 0) & (pc < self.width)
+        vals = np.where(inside, self._levels[0][np.where(inside, self._flat(pr, pc), 0)], 0)
         return vals.sum(axis=1, dtype=np.int64) / (_SCALE * len(pts))
 
     # ------------------------------------------------------------------ internals
@@ -254,13 +261,21 @@ class CorrelativeGrid:
     def _score(self, level: int, base: np.ndarray, k, r, c, norm: float) -> np.ndarray:
         if len(k) == 0:
             return np.zeros(0)
-        cell = (np.asarray(r) + self.pad) * self._wp + (np.asarray(c) + self.pad)
+        cell = self._flat(np.asarray(r), np.asarray(c))
         flat = np.take(base, k, axis=0)         # (M, N) cells of the points; take and an
         flat += cell[:, None]                   # in-place add: a quarter faster than indexing
-        return np.take(self._levels[level], flat).sum(axis=1, dtype=np.int32) * norm
+        # points above or below the padded grid fall off the flat array: its first and last
+        # cells are padding (0)
+        return np.take(self._levels[level], flat, mode='clip').sum(axis=1,
+                                                                   dtype=np.int32) * norm
+
+    def _flat(self, r, c):
+        """Flat index of map cells ``(r, c)`` (may lie in the padding) in the level grids."""
+        return (r + self._top) * self._wp + (c + self._left)
 
     def _any_free(self, level: int, r, c) -> np.ndarray:
-        return self._free[level][np.asarray(r), np.asarray(c)]
+        """Tell whether the windows of ``level`` anchored at ``(r, c)`` hold a free cell."""
+        return self._free[level][np.asarray(r) >> level, np.asarray(c) >> level]
 
     def _window_cells(self, window) -> tuple[int, int, int, int]:
         """Grid rows/cols ``[r0, r1) x [c0, c1)`` of the sensor positions to search."""
@@ -272,6 +287,33 @@ class CorrelativeGrid:
         c0, r0 = np.floor(corners.min(axis=0)).astype(int)
         c1, r1 = np.floor(corners.max(axis=0)).astype(int) + 1
         return max(int(r0), 0), min(int(r1), h), max(int(c0), 0), min(int(c1), w)
+
+
+def likelihood_grid(occupied: np.ndarray, resolution: float, sigma: float) -> np.ndarray:
+    """
+    Return ``round(255 exp(-d^2 / 2 sigma^2))`` (uint8) per cell, ``d`` its distance (m) to walls.
+
+    ``d`` is measured between cell centres to the nearest ``occupied`` cell. The value is 0
+    beyond a few sigma, so distances are computed only that far (``mapping.distance``: exact
+    squared distances, clamped) and turned into values by a table of every squared distance up
+    to there: the same numbers as from the full distance transform, at a few bytes per cell.
+    """
+    table = _likelihood_table(resolution, sigma)
+    limit = math.isqrt(len(table) - 1)
+    k = clamped_squared_distance(occupied, limit, np.int32)
+    return table[k]
+
+
+def _likelihood_table(resolution: float, sigma: float) -> np.ndarray:
+    """Return the likelihood (uint8) of each squared distance (cells^2), 0 at the last entry."""
+    # exp(-d^2 / 2 sigma^2) < 0.5 / 255 beyond sigma * sqrt(2 ln 510)
+    limit = int(math.ceil(sigma * math.sqrt(2.0 * math.log(2.0 * _SCALE)) / resolution)) + 1
+    k = np.arange(limit * limit + 1, dtype=np.float64)
+    dist = np.sqrt(k) * resolution
+    table = np.round(_SCALE * np.exp(-0.5 * (dist / sigma) ** 2)).astype(np.uint8)
+    if table[-1] != 0:
+        raise ValueError('likelihood table: the last entry must be 0')
+    return table
 
 
 def _block_reduce(a: np.ndarray, f: int, op) -> np.ndarray:
