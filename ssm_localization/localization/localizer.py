@@ -39,22 +39,22 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .confidence import confidence
-from .correlative import CorrelativeGrid
 from .evidence import beam_fractions, covariance_stds, endpoint_evidence, Evidence
 from .fusion import lever_arm_covariance
-from .refine import refine_poses, SurfaceModel
+from .map_layers import build_map_layers
+from .refine import refine_poses
 from .verify import BeamCheck, check_beams
-from .voting import alignment_yaws, PoseVoting, Votes
+from .voting import alignment_yaws, Votes
 from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
 from ..config.localization import LocalizerConfig
 from ..mapping.index import MapIndex
-from ..mapping.raycast import RayCaster
 from ..matching.features import prepare_scan, ScanFeatures
 from ..matching.matcher import match_features, spectral_score, spectral_solution
 from ..matching.pairwise import affinity_matrix, angle_table, distance_table
 from ..matching.ransac import ransac_hypotheses
 from ..matching.scan import MAX_RANGE, ranges_to_points
 from ..matching.spectral import binarize, leading_eigenvector, matching_score
+from ..progress import LayerHook, no_layers
 from ..transforms import apply, compose, inverse, Pose2, wrap_angle
 
 STATUSES = ('ok', 'ambiguous', 'failed')
@@ -208,24 +208,17 @@ class GlobalLocalizer:
     """
 
     def __init__(self, index: MapIndex, config: LocalizerConfig | None = None,
-                 confidence_model: ConfidenceModel = CONFIDENCE_MODEL):
+                 confidence_model: ConfidenceModel = CONFIDENCE_MODEL,
+                 layer: LayerHook = no_layers):
         self.index = index
         self.config = cfg = config or LocalizerConfig()
         self.confidence_model = confidence_model
         self.matcher_config = index.config.matcher
         if len(index.features) == 0:
             raise ValueError('the map index has no nodes: nothing to localize against')
-        m = index.map
-        occupied = m.occupied_mask(index.config.occupied_thresh)
-        self.grid = CorrelativeGrid(m, occupied_thresh=index.config.occupied_thresh,
-                                    sigma=cfg.search_sigma, depth=cfg.search_depth,
-                                    max_range=cfg.max_cast_range,
-                                    coarsen=max(1, round(cfg.search_cell / m.resolution)))
-        self.surface = SurfaceModel.from_occupancy(occupied, m.resolution, m.origin,
-                                                   cfg.surface_depth)
-        self.caster = RayCaster(occupied, m.resolution, m.origin)
-        self.voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw,
-                                 search_dims=cfg.vote_descriptor_dims)
+        layers = build_map_layers(index, cfg, layer)
+        self.grid, self.surface = layers.grid, layers.surface
+        self.caster, self.voting = layers.caster, layers.voting
         self._map_spectrum = np.fft.fft(self.voting.orientation_histogram())
         self._base_from_laser = inverse(cfg.laser_pose)
         self._paper_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
