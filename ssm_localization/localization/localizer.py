@@ -43,6 +43,7 @@ from .evidence import beam_fractions, covariance_stds, endpoint_evidence, Eviden
 from .fusion import lever_arm_covariance
 from .map_layers import build_map_layers
 from .refine import refine_poses
+from .regions import pick_leaves, REGION_RATIO, SearchPlan, with_region_bests
 from .verify import BeamCheck, check_beams
 from .voting import alignment_yaws, Votes
 from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
@@ -219,6 +220,7 @@ class GlobalLocalizer:
         layers = build_map_layers(index, cfg, layer)
         self.grid, self.surface = layers.grid, layers.surface
         self.caster, self.voting = layers.caster, layers.voting
+        self.regions = layers.regions
         self._map_spectrum = np.fft.fft(self.voting.orientation_histogram())
         self._base_from_laser = inverse(cfg.laser_pose)
         self._paper_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
@@ -309,7 +311,7 @@ class GlobalLocalizer:
         if self.config.search:
             seeds = _by_correlation(hyps)
             found = self.search_hypotheses(
-                query, self.search_yaws(query, [h.initial_pose[2] for h in seeds]))
+                query, self.search_plan(query, [h.initial_pose for h in seeds]))
             self._correlate(query, found)       # scored as the spectral ones are
             hyps += found
             clock.lap('search')
@@ -376,30 +378,40 @@ class GlobalLocalizer:
         sel = binarize(x, pairs, mc.binarize_min_ratio)
         return sel, matching_score(g, sel)
 
-    def search_hypotheses(self, query: Query, yaws: np.ndarray,
+    def search_hypotheses(self, query: Query, yaws: np.ndarray | SearchPlan,
                           window: tuple[float, float, float, float] | None = None
                           ) -> list[Hypothesis]:
         """
         Correlative branch and bound over the whole map (or ``window``) at the given ``yaws``.
 
-        At most ``search_keep`` distinct leaves, best first (see :meth:`search_yaws`).
+        ``yaws`` may be a :class:`~.regions.SearchPlan` (each yaw in its regions, see
+        :meth:`search_plan`). At most ``search_keep`` distinct leaves, best first (see
+        :meth:`search_yaws`).
         """
         cfg = self.config
+        plan = yaws if isinstance(yaws, SearchPlan) and yaws.allowed.shape[1] > 1 else None
+        yaws = yaws.yaws if isinstance(yaws, SearchPlan) else yaws
         if len(yaws) == 0:
             return []
         pts = _evenly(query.features.points, cfg.search_points)
         found = self.grid.search(pts, yaws=yaws, window=window, min_score=cfg.search_min_score,
-                                 ratio=cfg.search_ratio, budget_s=cfg.search_budget)
-        out: list[Hypothesis] = []
-        for pose, score in zip(found.poses, found.scores):
-            pose = tuple(float(v) for v in pose)
-            if any(not distinct(pose, h.initial_pose, cfg.vote_bin_xy, cfg.search_step * 3)
-                   for h in out):
-                continue
-            out.append(Hypothesis(source='search', initial_pose=pose, correlative=float(score)))
-            if len(out) >= cfg.search_keep:
-                break
-        return out
+                                 ratio=cfg.search_ratio, budget_s=cfg.search_budget,
+                                 regions=plan.regions if plan is not None else None,
+                                 region_ratio=REGION_RATIO if plan is not None else None)
+        return [Hypothesis(source='search', initial_pose=tuple(float(v) for v in found.poses[i]),
+                           correlative=float(found.scores[i]))
+                for i in pick_leaves(found, cfg.search_keep, lambda a, b: not distinct(
+                    a, b, cfg.vote_bin_xy, cfg.search_step * 3))]
+
+    def search_plan(self, query: Query, seeds: list[Pose2]) -> SearchPlan:
+        """
+        Return where to search at which yaws: :meth:`search_yaws`, region by region.
+
+        ``seeds``: laser poses of the best hypotheses, best first (``regions.py``).
+        """
+        feats = query.features
+        scan_angles = np.arctan2(feats.tangents[:, 1], feats.tangents[:, 0])
+        return self.regions.plan(scan_angles, seeds, self.config)
 
     def search_yaws(self, query: Query, yaws) -> np.ndarray:
         """
@@ -441,10 +453,14 @@ class GlobalLocalizer:
         """
         Refine the ``refine_hypotheses`` first hypotheses on the wall surface (batched).
 
+        On a map of several regions, also the first hypothesis of each region the first ones
+        leave out (``regions.py``); ``limit``: the first ``limit``, whatever their regions.
         Merge those that meet; best explained first.
         """
         cfg = self.config
-        todo = hyps[:cfg.refine_hypotheses if limit is None else limit]
+        todo = (hyps[:limit] if limit is not None else
+                with_region_bests(self.regions, hyps, cfg.refine_hypotheses,
+                                  lambda h: h.initial_pose))
         if not todo:
             return []
         results = refine_poses(self.surface, query.features.points,

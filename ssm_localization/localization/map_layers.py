@@ -4,7 +4,8 @@ What a localizer derives from its map once: the layers every scan is matched aga
 - the correlative search's likelihood pyramid (``correlative.py``),
 - the wall-surface model of the refinement and the evidence (``refine.py``),
 - the ray caster of the beam check (``mapping/raycast.py``),
-- the pose voting's pooled node features (``voting.py``).
+- the pose voting's pooled node features (``voting.py``),
+- the regions the correlative search looks in, each at its own yaws (``regions.py``).
 
 Each is built to cost memory with what it holds (see their modules: the pyramid padded on one
 side, the surface stored only near walls, the caster at two bytes a cell), and each exactly as
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 
 from .correlative import CorrelativeGrid
 from .refine import exact_reach, SurfaceModel
+from .regions import SearchRegions
 from .voting import PoseVoting
 from ..config.localization import LocalizerConfig
 from ..mapping.index import MapIndex
@@ -25,7 +27,7 @@ from ..mapping.raycast import RayCaster
 from ..progress import LayerHook, no_layers
 
 #: names of the layers, in the order they are built
-LAYER_NAMES = ('correlative grid', 'wall surface', 'ray caster', 'voting')
+LAYER_NAMES = ('correlative grid', 'wall surface', 'ray caster', 'voting', 'search regions')
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,6 +38,7 @@ class MapLayers:
     grid: CorrelativeGrid
     surface: SurfaceModel
     caster: RayCaster
+    regions: SearchRegions
 
 
 def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
@@ -57,4 +60,7 @@ def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
     with layer(LAYER_NAMES[3]):
         voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw,
                             search_dims=cfg.vote_descriptor_dims)
-    return MapLayers(voting=voting, grid=grid, surface=surface, caster=caster)
+    with layer(LAYER_NAMES[4]):
+        regions = SearchRegions.build(grid, voting, index.node_xy)
+    return MapLayers(voting=voting, grid=grid, surface=surface, caster=caster,
+                     regions=regions)

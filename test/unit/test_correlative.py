@@ -102,10 +102,10 @@ def test_window_and_yaws_restrict_the_search(grid):
 def test_levels_bound_the_leaves(grid):
     """Level k holds the maximum of level 0 over the 2^k x 2^k cells anchored at each cell."""
     t, left = grid._top, grid._left
-    base = grid._levels[0].reshape(-1, grid._wp)
+    base = grid.level_grid(0)
     rng = np.random.default_rng(3)
     for k in range(1, grid.depth + 1):
-        level = grid._levels[k].reshape(-1, grid._wp)
+        level = grid.level_grid(k)
         s = 1 << k
         for r, c in rng.integers(0, 40, (30, 2)):
             window = base[t + r:t + r + s, left + c:left + c + s]
@@ -162,3 +162,28 @@ def test_points_off_the_map_score_nothing(grid):
     for pose, score in zip(found.poses[:200], found.scores[:200]):
         assert grid.score_poses(np.array([[9.9, 0.0], [-9.9, 0.0], [0.0, 9.9], [0.0, -9.9]]),
                                 pose[None])[0] == pytest.approx(score)
+
+
+def test_region_ratio_keeps_each_regions_best_place():
+    """A wall-dense region scoring every scan well does not hide another region's best place."""
+    d = np.zeros((64, 160), np.int8)
+    d[::4, :64] = 100                                 # left: walls every 0.4 m
+    d[:, ::4][:, :16] = 100
+    room = _rooms().data
+    d[12:52, 96:156] = room                           # right: the rooms
+    occ = OccupancyMap(d, RES, (0.0, 0.0, 0.0))
+    grid = CorrelativeGrid(occ, depth=3, sigma=0.1, max_range=10.0)
+    truth = _cell_centre_pose(occ, 12 + 12, 96 + 20, 0.4)
+    pts = _scan_from(occ, truth)
+    labels = np.where(np.arange(grid.free_windows().shape[1]) < 64 // 8, 0, 1)[None, :] \
+        * np.ones((grid.free_windows().shape[0], 1), int)
+    labels = np.where(grid.free_windows(), labels, -1)
+    allowed = np.ones((1, 2), bool)
+    found = grid.search(pts, yaws=[0.4], min_score=0.1, ratio=0.95,
+                        regions=(labels, allowed), region_ratio=0.3)
+    assert set(found.regions.tolist()) == {0, 1} or found.regions[0] == 1
+    right = found.poses[found.regions == 1][0]
+    assert math.hypot(right[0] - truth[0], right[1] - truth[1]) < 2 * RES
+    # without regions the result is the plain search's, and says no regions
+    plain = grid.search(pts, yaws=[0.4], min_score=0.1, ratio=0.95)
+    assert plain.regions is None
