@@ -216,7 +216,7 @@ def test_cli_index_with_params_and_plot(tmp_path, capsys):
 
 
 def test_office_map_is_deterministic():
-    from ssm_localization.bench.index import office_map
+    from ssm_localization.bench.synthetic import office_map
     a, b = office_map(size=30.0), office_map(size=30.0)
     assert a.shape == (600, 600) and a.checksum() == b.checksum()
     free = a.free_mask().mean()

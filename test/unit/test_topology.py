@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import dijkstra
 from ssm_localization import load_map_yaml, OccupancyMap, TopologyConfig
-from ssm_localization.bench.index import office_map
+from ssm_localization.bench.synthetic import office_map
 from ssm_localization.mapping import topology
 from ssm_localization.mapping.topology import build_topology, NODE_KIND_NAMES, NodeKind
 
