@@ -454,13 +454,14 @@ class GlobalLocalizer:
         Refine the ``refine_hypotheses`` first hypotheses on the wall surface (batched).
 
         On a map of several regions, also the first hypothesis of each region the first ones
-        leave out (``regions.py``); ``limit``: the first ``limit``, whatever their regions.
+        leave out and every one the search found (``regions.py``); ``limit``: the first
+        ``limit``, whatever their regions.
         Merge those that meet; best explained first.
         """
         cfg = self.config
         todo = (hyps[:limit] if limit is not None else
                 with_region_bests(self.regions, hyps, cfg.refine_hypotheses,
-                                  lambda h: h.initial_pose))
+                                  lambda h: h.initial_pose, lambda h: 'search' in h.found_by))
         if not todo:
             return []
         results = refine_poses(self.surface, query.features.points,

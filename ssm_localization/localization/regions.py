@@ -41,6 +41,9 @@ BINS = 180
 #: the correlative search keeps the best places of every region scoring this much of the best
 #: anywhere (``CorrelativeGrid.search``'s ``region_ratio``)
 REGION_RATIO = 0.85
+#: after a regional search, leaves this far (metres) from every leaf taken are other places:
+#: up to ``search_keep`` of them are taken too, as the rivals a look-alike answer must beat
+PLACE_APART = 3.0
 
 
 @dataclass(frozen=True)
@@ -216,22 +219,27 @@ def pick_leaves(found: CorrelativeResult, keep: int,
     """
     Return the leaves of a search to turn into hypotheses, best first.
 
-    The first ``keep`` leaves that are not the ``same`` place as one taken before; after a
+    The first ``keep`` leaves that are not the ``same`` place as one taken before. After a
     regional search (``found.regions``) also the best such leaf of every region not yet among
-    them.
+    them, and up to ``keep`` leaves more than :data:`PLACE_APART` from every leaf taken (other
+    rooms that look alike: the rivals that tell whether the answer is unique).
     """
     out: list[int] = []
     poses: list[Pose2] = []
     taken: set[int] = set()
+    others = 0
     for i, pose in enumerate(found.poses):
         pose = tuple(float(v) for v in pose)
         region = int(found.regions[i]) if found.regions is not None else -1
-        if len(out) >= keep and (found.regions is None or region in taken):
-            if found.regions is None:
-                break
-            continue
+        if len(out) >= keep and found.regions is None:
+            break
         if any(same(pose, p) for p in poses):
             continue
+        if len(out) >= keep and region in taken:
+            if others >= keep or any(math.hypot(pose[0] - p[0], pose[1] - p[1]) <= PLACE_APART
+                                     for p in poses):
+                continue
+            others += 1
         out.append(i)
         poses.append(pose)
         taken.add(region)
@@ -242,12 +250,14 @@ T = TypeVar('T')
 
 
 def with_region_bests(regions: SearchRegions, ranked: Sequence[T], first: int,
-                      pose_of: Callable[[T], Pose2]) -> list[T]:
+                      pose_of: Callable[[T], Pose2],
+                      always: Callable[[T], bool] = lambda item: False) -> list[T]:
     """
     Return the ``first`` items of ``ranked``, and the first item of each region they miss.
 
-    So every building's best candidate goes on, however the others rank; with one region just
-    the first ``first``.
+    So every building's best candidate goes on, however the others rank; with several regions
+    also every item for which ``always`` holds (the search's leaves: its rivals). With one
+    region just the first ``first``.
     """
     head = list(ranked[:first])
     if regions.count <= 1 or len(ranked) <= first:
@@ -255,7 +265,7 @@ def with_region_bests(regions: SearchRegions, ranked: Sequence[T], first: int,
     where = regions.region_of(np.array([pose_of(h)[:2] for h in ranked]))
     have = set(where[:first].tolist())
     for item, region in zip(ranked[first:], where[first:].tolist()):
-        if region >= 0 and region not in have:
+        if (region >= 0 and region not in have) or always(item):
             head.append(item)
             have.add(region)
     return head

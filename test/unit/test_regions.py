@@ -102,7 +102,7 @@ def test_leaves_and_refinement_keep_each_regions_best():
     assert pick_leaves(plain, 2, same) == [0, 2]
     regional = CorrelativeResult(poses, np.linspace(1, 0.5, 6), True,
                                  regions=np.array([0, 0, 0, 1, 1, 2]))
-    assert pick_leaves(regional, 2, same) == [0, 2, 3, 5]
+    assert pick_leaves(regional, 2, same) == [0, 2, 3, 4, 5]     # 4: another place
 
     class Regions:
         count = 3
