@@ -28,6 +28,7 @@ import numpy as np
 from .places import REAL_PLACES, sim_queries
 from .synthetic import office_map
 from ..io.bag_records import ScanRecord
+from ..io.bag_writer import write_bag
 from ..io.carmen import build_map, CarmenLog, log_scan_records, read_carmen_log
 from ..mapping.map_io import load_map_yaml, OccupancyMap, save_map_yaml
 from ..transforms import compose, Pose2
@@ -217,3 +218,20 @@ def site_queries(data: Path, site: Site, real_max: int, n_sim: int,
 def office_30m() -> OccupancyMap:
     """Return the synthetic 30 M-cell office (5480 x 5480 cells, seed 0)."""
     return office_map(size=OFFICE_30M_SIZE)
+
+
+def write_query_bag(path: Path, grid: OccupancyMap, queries: list[SiteQueries],
+                    period: float = 0.1) -> Path:
+    """
+    Write ``queries`` as one bag (``/map``, ``/scan``, ``/ground_truth``) for ``replay``.
+
+    The scans are restamped ``period`` seconds apart in the given order (the buildings' own
+    stamps would collide); returns the bag's path.
+    """
+    scans, truth = [], {}
+    for q in queries:
+        for scan, pose in zip(q.scans, q.truth):
+            stamp = round(1.0 + period * len(scans), 6)
+            scans.append(dataclasses.replace(scan, stamp=stamp))
+            truth[stamp] = pose
+    return write_bag(path, map=grid, scans=scans, ground_truth=truth, overwrite=True)

@@ -37,7 +37,7 @@ import time
 
 import numpy as np
 
-from .campus import campus_map, office_30m, site_queries
+from .campus import campus_map, office_30m, site_queries, SiteQueries, write_query_bag
 from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer
 from .places import (answers_on, foreign, load_place, place_grid, real_grid, real_map,
@@ -92,6 +92,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'simulated maps on one 27.6 M-cell grid) and office_30m')
     parser.add_argument('--campus-n', type=int, default=100,
                         help='queries per building of the campus set (default 100)')
+    parser.add_argument('--campus-bags', metavar='DIR',
+                        help='with the campus-scale sets: also write their queries as bags '
+                             '(DIR/campus, DIR/office_30m, with /map and /ground_truth) for '
+                             '`ssm_localization replay`')
     parser.add_argument('--paper', action='store_true', help='also run the plain paper pipeline')
     parser.add_argument('--peer', action='store_true',
                         help='also run the exhaustive correlative search on the same queries')
@@ -259,6 +263,10 @@ def run(args: argparse.Namespace) -> int:
         if name == 'office_30m':
             map_name, grid = name, office_30m()
             scans, truth = sim_queries(grid, args.n, args.seed, {})
+            if args.campus_bags:
+                bag = write_query_bag(Path(args.campus_bags) / name, grid, [SiteQueries(
+                    name, False, scans, [truth[s.stamp] for s in scans])])
+                print(f'  wrote {bag}', flush=True)
         elif name in REAL_SETS:
             map_name = name
             grid, scans, truth = _real_queries(data, work, REAL_SETS[name], args.real_max)
@@ -344,9 +352,10 @@ def run_campus(args: argparse.Namespace, data: Path, work: Path, index_cfg, loc_
     print(f'campus: {campus.grid.width} x {campus.grid.height} cells, {len(localizer.index)} '
           f'nodes, {localizer.regions.count} search regions (index and localizer '
           f'{time.perf_counter() - t0:.0f} s)', flush=True)
-    runs = []
+    runs, queries = [], []
     for site in campus.sites:
         q = site_queries(data, site, args.campus_n, args.campus_n, args.seed)
+        queries.append(q)
         truth = dict(zip((s.stamp for s in q.scans), q.truth))
         one = run_set(localizer, q.scans, truth)
         print(_line(f'campus:{site.name}', 'ssm', one, split_of(site.name)), flush=True)
@@ -357,6 +366,9 @@ def run_campus(args: argparse.Namespace, data: Path, work: Path, index_cfg, loc_
                     sum(x.spectral_found for x in runs))
     print(_line('campus', 'ssm', allrun, 'mixed'), flush=True)
     print(_breakdown(allrun), flush=True)
+    if args.campus_bags:
+        bag = write_query_bag(Path(args.campus_bags) / 'campus', campus.grid, queries)
+        print(f'  wrote {bag}', flush=True)
 
 
 def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cfg,
