@@ -11,7 +11,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: venv demo test test-fast params-yaml bench bench-scanmatch bench-index bench-localize bench-track colcon-check clean
+.PHONY: venv demo test test-fast lint params-yaml bench bench-scanmatch bench-index bench-localize bench-track colcon-check clean
 
 $(STAMP): requirements.txt setup.py setup.cfg
 	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 10), "Python 3.10+ required"'
@@ -32,7 +32,10 @@ test: $(STAMP)
 
 # test/unit without DDS (under a minute); make test runs test/unit and test/integration
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -q -ra test/unit -m "not slow and not dds"
+	$(BIN)/python -m pytest -q -ra test/unit -m "not slow and not dds and not linter"
+
+lint: $(STAMP)
+	$(BIN)/python -m pytest -q -ra test -m linter
 
 bench: bench-scanmatch bench-index bench-localize bench-track
 

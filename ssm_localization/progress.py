@@ -7,10 +7,20 @@ first bar is drawn: the core does not need it).
 """
 from __future__ import annotations
 
+from contextlib import AbstractContextManager, nullcontext
 from typing import Any, Callable
 
 # progress(done, total, label): the callback type the ROS-free core accepts for long jobs.
 ProgressCallback = Callable[[int, int, str], None]
+
+# layer(name): a context manager around the building of one layer of an index or a localizer
+# (``bench index`` measures the memory of each); the core calls it when it is given one.
+LayerHook = Callable[[str], AbstractContextManager]
+
+
+def no_layers(name: str) -> AbstractContextManager:
+    """Return the :data:`LayerHook` that observes nothing."""
+    return nullcontext()
 
 
 class TqdmProgress:

@@ -1,14 +1,21 @@
 """
-``ssm_localization bench index``: index build time and peak memory per map.
+``ssm_localization bench index``: index build time, localizer start-up and memory per map.
 
 Every map is indexed in a fresh subprocess (``python -m ssm_localization.bench.index --worker
-SPEC``) so that its peak RSS is honest; the table shows the build wall time, the peak RSS of the
-process during the build (``VmHWM`` from /proc, reset after imports and map loading) and its
-increase over the RSS before the build.
+SPEC``) so that its memory is honest: the table shows the index build's wall time, the time the
+localizer then takes to derive its map layers (``GlobalLocalizer``), the peak RSS of the whole
+process (``VmHWM`` from /proc: interpreter, imports, the map, the index and the localizer, as a
+user running ``ssm_localization replay`` has them) and its peak during the build alone (reset
+after the map is loaded). A second subprocess per map (``--layers`` worker) builds the same with
+``tracemalloc`` and prints what each layer costs: the memory it keeps, its peak while built (the
+intermediates it frees), in MB and bytes per map cell, and its time under tracing.
 Maps: the shared nav2 maps, maps built from the shared CARMEN logs (when present; built by
 ``io.carmen.build_map`` with its defaults, saved as YAML+PGM in a temporary directory), any
-``--extra MAP.yaml`` and a deterministic synthetic 100 m x 100 m office at 0.05 m (2000 x 2000).
-Targets (2-core machine): depot / turtlebot3_world < 1 s; the office < 10 s and < 1 GB.
+``--extra MAP.yaml``, a deterministic synthetic 100 m x 100 m office at 0.05 m (2000 x 2000);
+``--campus`` adds the campus of ``bench/campus.py`` (the six real buildings and three simulated
+maps on one 27.6 M-cell grid) and the synthetic 274 m office (30 M cells).
+Targets (2-core machine): depot / turtlebot3_world < 1 s; the office < 10 s and < 1 GB; the
+campus and the 30 M-cell office: index < 30 s, whole process < 2 GB.
 """
 from __future__ import annotations
 
@@ -21,91 +28,31 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-
+from .campus import campus_map, office_30m
 from .data import data_dir, DATA_HELP
+from .memory import format_layers, LayerMeter
+from .synthetic import office_map
 from ..io.carmen import build_map, read_carmen_log
+from ..localization.localizer import GlobalLocalizer
 from ..mapping.index import build_index
 from ..mapping.map_io import load_map_yaml, OccupancyMap, save_map_yaml
 
-TARGETS = {'depot': (1.0, None), 'turtlebot3_world': (1.0, None), 'office': (10.0, 1024.0)}
+__all__ = ['office_map', 'add_arguments', 'run']
+
+#: (index build s, whole-process peak MB) targets by map name
+TARGETS = {'depot': (1.0, None), 'turtlebot3_world': (1.0, None), 'office': (10.0, 1024.0),
+           'campus': (30.0, 2048.0), 'office_30m': (30.0, 2048.0)}
+#: map specs that are not YAML files: the synthetic offices, the campus (``campus:DATA:WORK``)
+SYNTHETIC = {'office': office_map, 'office_30m': office_30m}
 
 
-def office_map(size: float = 100.0, resolution: float = 0.05, seed: int = 0):
-    """
-    Return a deterministic synthetic office (corridors, rooms with doors, furniture, halls).
-
-    ``size`` x ``size`` metres at ``resolution`` (default 2000 x 2000 cells), frame ``map``,
-    origin (0, 0, 0). Walls are 0.15 m thick, corridors 2.4 m wide, doors 1 m wide.
-    """
-    rng = np.random.default_rng(seed)
-    n = int(round(size / resolution))
-    grid = np.zeros((n, n), dtype=np.int8)
-
-    def cells(v: float) -> int:
-        return int(round(v / resolution))
-
-    def box(x0, y0, x1, y1, value=100):
-        grid[max(cells(y0), 0):min(cells(y1), n), max(cells(x0), 0):min(cells(x1), n)] = value
-
-    wall, corridor, door = 0.15, 2.4, 1.0
-    box(0, 0, size, wall)
-    box(0, size - wall, size, size)
-    box(0, 0, wall, size)
-    box(size - wall, 0, size, size)
-    xs = np.arange(12.5, size, 25.0)   # vertical corridor centres
-    ys = np.arange(10.0, size, 20.0)   # horizontal corridor centres
-    xb = np.concatenate(([wall], xs + corridor / 2))
-    xe = np.concatenate((xs - corridor / 2, [size - wall]))
-    yb = np.concatenate(([wall], ys + corridor / 2))
-    ye = np.concatenate((ys - corridor / 2, [size - wall]))
-    for bx0, bx1 in zip(xb, xe):
-        for by0, by1 in zip(yb, ye):
-            if bx1 - bx0 < 4 or by1 - by0 < 4:
-                continue
-            kind = rng.random()
-            if kind < 0.15:  # open hall with pillars
-                for px in np.arange(bx0 + 3.0, bx1 - 2.0, 4.0):
-                    for py in np.arange(by0 + 3.0, by1 - 2.0, 4.0):
-                        box(px - 0.2, py - 0.2, px + 0.2, py + 0.2)
-                continue
-            # block outline, two rows of rooms split at mid-height
-            box(bx0, by0, bx1, by0 + wall)
-            box(bx0, by1 - wall, bx1, by1)
-            box(bx0, by0, bx0 + wall, by1)
-            box(bx1 - wall, by0, bx1, by1)
-            ym = (by0 + by1) / 2
-            box(bx0, ym - wall / 2, bx1, ym + wall / 2)
-            for lower in (True, False):
-                x = bx0
-                while x < bx1 - 2.5:
-                    width = float(rng.choice([3.0, 4.0, 5.0, 6.0]))
-                    x1 = min(x + width, bx1)
-                    if bx1 - x1 < 2.5:
-                        x1 = bx1
-                    if x1 < bx1:
-                        box(x1 - wall / 2, by0 if lower else ym, x1 + wall / 2,
-                            ym if lower else by1)
-                    # door on the corridor side
-                    dx = x + float(rng.uniform(0.4, max(0.5, x1 - x - door - 0.4)))
-                    if lower:
-                        box(dx, by0, dx + door, by0 + wall, 0)
-                    else:
-                        box(dx, by1 - wall, dx + door, by1, 0)
-                    # furniture away from the door side
-                    for _ in range(int(rng.integers(0, 3))):
-                        fw, fh = rng.uniform(0.5, 1.5, 2)
-                        fx = rng.uniform(x + 0.5, max(x + 0.6, x1 - fw - 0.5))
-                        fy = (ym - fh - 0.3) if lower else (ym + 0.3)
-                        box(fx, fy, fx + fw, fy + fh)
-                    x = x1
-    return OccupancyMap(grid, resolution, (0.0, 0.0, 0.0), 'map')
-
-
-def _load(spec: str):
-    if spec.startswith('office'):
-        return office_map()
-    return load_map_yaml(spec)
+def _load(spec: str) -> OccupancyMap:
+    if spec in SYNTHETIC:
+        return SYNTHETIC[spec]()
+    if spec.startswith('campus:'):
+        _, data, work = spec.split(':', 2)
+        return campus_map(Path(data), Path(work)).grid
+    return load_map_yaml(spec, max_cells=0)
 
 
 def _rss_kb(field: str) -> float:
@@ -133,19 +80,34 @@ def _reset_peak() -> None:
 
 
 def _worker(spec: str) -> None:
-    """Index one map in this process and print one JSON line."""
+    """Index one map and build its localizer in this process; print one JSON line."""
     occ_map = _load(spec)
+    loaded = _rss_kb('VmHWM')           # the peak so far: imports and map loading
     base = _rss_kb('VmRSS')
     _reset_peak()
     t0 = time.perf_counter()
     index = build_index(occ_map)
-    elapsed = time.perf_counter() - t0
-    peak = _rss_kb('VmHWM')
-    print(json.dumps({'time': elapsed, 'peak_mb': peak / 1024.0,
-                      'delta_mb': (peak - base) / 1024.0,
+    t_index = time.perf_counter() - t0
+    build_peak = _rss_kb('VmHWM')
+    t0 = time.perf_counter()
+    GlobalLocalizer(index)
+    t_localizer = time.perf_counter() - t0
+    whole = max(loaded, _rss_kb('VmHWM'))
+    print(json.dumps({'time': t_index, 'localizer_time': t_localizer,
+                      'peak_mb': whole / 1024.0, 'build_peak_mb': build_peak / 1024.0,
+                      'delta_mb': (build_peak - base) / 1024.0,
                       'nodes': len(index), 'kinds': index.kind_counts(),
                       'cells': f'{occ_map.width}x{occ_map.height}',
-                      'res': occ_map.resolution}))
+                      'n_cells': occ_map.width * occ_map.height, 'res': occ_map.resolution}))
+
+
+def _layers_worker(spec: str) -> None:
+    """Build the index and the localizer layer by layer under tracemalloc; print JSON."""
+    occ_map = _load(spec)
+    meter = LayerMeter(trace=True)
+    index = build_index(occ_map, layer=meter)
+    GlobalLocalizer(index, layer=meter)
+    print(json.dumps({'map_mb': occ_map.data.nbytes / 1e6, 'layers': meter.as_dicts()}))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -155,10 +117,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='skip the maps built from the shared CARMEN logs')
     parser.add_argument('--no-office', action='store_true',
                         help='skip the synthetic 2000 x 2000 office map')
+    parser.add_argument('--campus', action='store_true',
+                        help='also the campus (27.6 M cells: the six real buildings and three '
+                             'simulated maps, bench/campus.py) and the 30 M-cell synthetic office')
+    parser.add_argument('--only-campus', action='store_true',
+                        help='only the campus and the 30 M-cell office')
+    parser.add_argument('--no-layers', action='store_true',
+                        help='skip the per-layer memory breakdown (a second, traced build)')
     parser.add_argument('--repeat', type=int, default=1,
                         help='runs per map; the fastest is reported (default 1)')
     parser.add_argument('--data', default=None,
                         help=DATA_HELP + ' (without it, only --extra maps and the office)')
+    parser.add_argument('--work', default='bench_data', help='where the campus map is cached')
 
 
 def _shared_data(arg: str | None) -> Path | None:
@@ -172,38 +142,59 @@ def _shared_data(arg: str | None) -> Path | None:
         return None
 
 
-def run(args: argparse.Namespace) -> int:
+def _specs(args: argparse.Namespace, shared: Path | None, tmp: Path) -> list[tuple[str, str]]:
+    """Return ``(name, spec)`` of the maps to benchmark (CARMEN maps built into ``tmp``)."""
     specs: list[tuple[str, str]] = []
+    if not args.only_campus:
+        for name in ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room'):
+            if shared and (shared / 'maps' / f'{name}.yaml').is_file():
+                specs.append((name, str(shared / 'maps' / f'{name}.yaml')))
+        if shared and not args.no_carmen:  # built here, so the worker's peak is the build alone
+            for log in sorted((shared / 'carmen').glob('*.log.gz')):
+                name = log.name.split('-corrected')[0]
+                yaml_path = tmp / f'{name}.yaml'
+                save_map_yaml(build_map(read_carmen_log(log)), yaml_path)
+                specs.append((name, str(yaml_path)))
+        for extra in args.extra:
+            if not Path(extra).is_file():
+                raise FileNotFoundError(f'--extra map not found: {extra}')
+            specs.append((Path(extra).stem, extra))
+        if not args.no_office:
+            specs.append(('office', 'office'))
+    if args.campus or args.only_campus:
+        if shared is None:
+            raise FileNotFoundError('--campus needs the shared data (--data DIR)')
+        work = Path(args.work)
+        campus_map(shared, work)        # built and cached here, not in the timed worker
+        specs.append(('campus', f'campus:{shared}:{work}'))
+        specs.append(('office_30m', 'office_30m'))
+    return specs
+
+
+def _worker_json(flag: str, spec: str) -> tuple[dict | None, str]:
+    proc = subprocess.run([sys.executable, '-m', 'ssm_localization.bench.index', flag, spec],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        return None, (proc.stderr.strip().splitlines() or ['?'])[-1]
+    return json.loads(proc.stdout.strip().splitlines()[-1]), ''
+
+
+def run(args: argparse.Namespace) -> int:
     shared = _shared_data(args.data)
-    for name in ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room'):
-        if shared and (shared / 'maps' / f'{name}.yaml').is_file():
-            specs.append((name, str(shared / 'maps' / f'{name}.yaml')))
     tmp = tempfile.TemporaryDirectory(prefix='ssm_bench_index_')
-    if shared and not args.no_carmen:  # built here, so the worker's peak is the build alone
-        for log in sorted((shared / 'carmen').glob('*.log.gz')):
-            name = log.name.split('-corrected')[0]
-            yaml_path = Path(tmp.name) / f'{name}.yaml'
-            save_map_yaml(build_map(read_carmen_log(log)), yaml_path)
-            specs.append((name, str(yaml_path)))
-    for extra in args.extra:
-        if not Path(extra).is_file():
-            raise FileNotFoundError(f'--extra map not found: {extra}')
-        specs.append((Path(extra).stem, extra))
-    if not args.no_office:
-        specs.append(('office', 'office'))
-    print(f'{"map":18s} {"cells":>11s} {"res":>5s} {"nodes":>6s} {"build s":>8s} '
-          f'{"peak MB":>8s} {"+MB":>7s}  target')
+    specs = _specs(args, shared, Path(tmp.name))
+    print(f'{"map":18s} {"cells":>11s} {"res":>5s} {"nodes":>6s} {"index s":>8s} '
+          f'{"local. s":>8s} {"peak MB":>8s} {"build MB":>8s}  target')
     failed = False
+    breakdowns = []
     for name, spec in specs:
         best = None
         for _ in range(max(args.repeat, 1)):
-            proc = subprocess.run([sys.executable, '-m', 'ssm_localization.bench.index',
-                                   '--worker', spec], capture_output=True, text=True)
-            if proc.returncode != 0:
-                print(f'{name:18s} FAILED: {proc.stderr.strip().splitlines()[-1:]}')
+            res, error = _worker_json('--worker', spec)
+            if res is None:
+                print(f'{name:18s} FAILED: {error}')
                 failed = True
                 break
-            res = json.loads(proc.stdout.strip().splitlines()[-1])
             if best is None or res['time'] < best['time']:
                 best = res
         if best is None:
@@ -215,7 +206,19 @@ def run(args: argparse.Namespace) -> int:
             verdict = ('met' if ok else 'MISSED') + f' (< {t_max:g} s' + \
                 (f', < {mb_max:g} MB)' if mb_max else ')')
         print(f'{name:18s} {best["cells"]:>11s} {best["res"]:5.2f} {best["nodes"]:6d} '
-              f'{best["time"]:8.2f} {best["peak_mb"]:8.0f} {best["delta_mb"]:7.0f}  {verdict}')
+              f'{best["time"]:8.2f} {best["localizer_time"]:8.2f} {best["peak_mb"]:8.0f} '
+              f'{best["build_peak_mb"]:8.0f}  {verdict}', flush=True)
+        if not args.no_layers:
+            layers, error = _worker_json('--layers', spec)
+            breakdowns.append((name, best['n_cells'], layers, error))
+    for name, cells, layers, error in breakdowns:
+        if layers is None:
+            print(f'{name}: layer breakdown FAILED: {error}')
+            failed = True
+            continue
+        print(f'{name}: memory per layer ({cells / 1e6:.1f} M cells; the map itself '
+              f'{layers["map_mb"]:.1f} MB; traced, so slower)')
+        print(format_layers(layers['layers'], cells))
     tmp.cleanup()
     return 1 if failed else 0
 
@@ -223,5 +226,7 @@ def run(args: argparse.Namespace) -> int:
 if __name__ == '__main__':
     if len(sys.argv) == 3 and sys.argv[1] == '--worker':
         _worker(sys.argv[2])
+    elif len(sys.argv) == 3 and sys.argv[1] == '--layers':
+        _layers_worker(sys.argv[2])
     else:
-        sys.exit('usage: python -m ssm_localization.bench.index --worker MAP_SPEC')
+        sys.exit('usage: python -m ssm_localization.bench.index --worker|--layers MAP_SPEC')

@@ -10,7 +10,11 @@ Data sets (``--sets``):
   from the even-numbered scans of the CARMEN log, the queries are the odd-numbered scans (ground
   truth: the corrected poses);
 - ``intel_clutter``, ``aces_clutter``, ``fr079_clutter`` (``all``): simulated scans with clutter
-  on those real-built maps.
+  on those real-built maps;
+- ``campus`` (``--campus``): the six real buildings and three simulated maps on one 27.6 M-cell
+  grid (``bench/campus.py``), ``--campus-n`` queries of each building (its odd-numbered scans /
+  random poses), one line per building and the campus pooled; ``office_30m`` (``--campus``):
+  the synthetic office grown to 30 M cells, ``-n`` random poses.
 Every set runs with the same defaults (no per-set parameter). The ``TUNING_SETS`` are those the
 defaults were chosen on (the localizer's: depot and its variants, Intel, ACES) or the confidence
 was calibrated on (Intel, ACES, FHW, depot, the empty room); every other set is a validation set
@@ -40,6 +44,7 @@ import time
 
 import numpy as np
 
+from .campus import campus_map, office_30m, site_queries, SiteQueries, write_query_bag
 from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer
 from .places import (answers_on, foreign, load_place, place_grid, real_grid, real_map,
@@ -68,7 +73,9 @@ REAL_SETS = {'intel': 'intel', 'aces': 'aces', 'fr079': 'freiburg-079', 'csail':
 #: simulated clutter on the maps built from the real logs
 REAL_SIM_SETS = {f'{k}_clutter': (k, CLUTTER) for k in ('intel', 'aces', 'fr079')}
 DEFAULT_SETS = list(SIM_SETS) + list(REAL_SETS)
-ALL_SETS = DEFAULT_SETS + list(REAL_SIM_SETS)
+#: the campus-scale sets (``--campus``): 25-30 M cells each
+CAMPUS_SETS = ['campus', 'office_30m']
+ALL_SETS = DEFAULT_SETS + list(REAL_SIM_SETS) + CAMPUS_SETS
 #: the sets the defaults were chosen on (the localizer's on depot, Intel and ACES; the confidence
 #: model calibrated on Intel, ACES, FHW, depot and the empty room, by
 #: ``scripts/learn_confidence.py``); every other set is a validation set, only ever measured
@@ -87,6 +94,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--real-max', type=int, default=0,
                         help='at most this many real queries per log (0 = all odd scans)')
     parser.add_argument('--quick', action='store_true', help='-n 60 and --real-max 60')
+    parser.add_argument('--campus', action='store_true',
+                        help='also the campus-scale sets: campus (six real buildings and three '
+                             'simulated maps on one 27.6 M-cell grid) and office_30m')
+    parser.add_argument('--campus-n', type=int, default=100,
+                        help='queries per building of the campus set (default 100)')
+    parser.add_argument('--campus-bags', metavar='DIR',
+                        help='with the campus-scale sets: also write their queries as bags '
+                             '(DIR/campus, DIR/office_30m, with /map and /ground_truth) for '
+                             '`ssm_localization replay`')
     parser.add_argument('--paper', action='store_true', help='also run the plain paper pipeline')
     parser.add_argument('--peer', action='store_true',
                         help='also run the exhaustive correlative search on the same queries')
@@ -231,7 +247,9 @@ def _compare(ours: SetRun, peer: SetRun) -> str:
 def run(args: argparse.Namespace) -> int:
     if args.quick:
         args.n, args.real_max = 60, 60
-    sets = ALL_SETS if 'all' in args.sets else args.sets
+    sets = [s for s in ALL_SETS if s not in CAMPUS_SETS] if 'all' in args.sets else args.sets
+    if args.campus:
+        sets = [s for s in sets if s not in CAMPUS_SETS] + CAMPUS_SETS
     data, work = data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg = load_configs(args.params)
     built: dict[tuple[str, str], object] = {}     # (map, localizer kind): built once per map
@@ -245,7 +263,18 @@ def run(args: argparse.Namespace) -> int:
     sensed: dict[tuple[str, str], list[ResultRow]] = {}
     for name in sets:
         t0 = time.perf_counter()
-        if name in REAL_SETS:
+        if name == 'campus':
+            run_campus(args, data, work, index_cfg, loc_cfg, pooled)
+            print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
+            continue
+        if name == 'office_30m':
+            map_name, grid = name, office_30m()
+            scans, truth = sim_queries(grid, args.n, args.seed, {})
+            if args.campus_bags:
+                bag = write_query_bag(Path(args.campus_bags) / name, grid, [SiteQueries(
+                    name, False, scans, [truth[s.stamp] for s in scans])])
+                print(f'  wrote {bag}', flush=True)
+        elif name in REAL_SETS:
             map_name = name
             grid, scans, truth = _real_queries(data, work, REAL_SETS[name], args.real_max)
         elif name in REAL_SIM_SETS:
@@ -277,7 +306,10 @@ def run(args: argparse.Namespace) -> int:
             paper = run_set(once(map_name, 'paper', lambda: GlobalLocalizer(index, paper_cfg)),
                             scans, truth, breakdown=False)
             print(_line(name, 'paper', paper), flush=True)
-        if args.peer:
+        if args.peer and name in CAMPUS_SETS:
+            print('  --peer: not run on the campus-scale sets (an exhaustive search over 30 M '
+                  'cells at every yaw)', flush=True)
+        elif args.peer:
             peer_of = once(map_name, 'peer', lambda: ExhaustiveLocalizer(index, ours=localizer))
             peer = run_set(peer_of, scans, truth, breakdown=False)
             print(_line(name, 'peer', peer), flush=True)
@@ -311,6 +343,39 @@ def run(args: argparse.Namespace) -> int:
     if args.reliability and tables:
         print(f'wrote {plot_reliability(tables, args.reliability)}')
     return 0
+
+
+def run_campus(args: argparse.Namespace, data: Path, work: Path, index_cfg, loc_cfg,
+               pooled: dict[str, list[ResultRow]]) -> None:
+    """
+    Localize ``--campus-n`` queries of every building of the campus on the campus map.
+
+    One line per building (``campus:NAME``, in its building's split), then the campus pooled
+    and where its misses were lost; the rows join the pooled splits.
+    """
+    campus = campus_map(data, work)
+    t0 = time.perf_counter()
+    localizer = GlobalLocalizer(build_index(campus.grid, index_cfg), loc_cfg)
+    print(f'campus: {campus.grid.width} x {campus.grid.height} cells, {len(localizer.index)} '
+          f'nodes, {localizer.regions.count} search regions (index and localizer '
+          f'{time.perf_counter() - t0:.0f} s)', flush=True)
+    runs, queries = [], []
+    for site in campus.sites:
+        q = site_queries(data, site, args.campus_n, args.campus_n, args.seed)
+        queries.append(q)
+        truth = dict(zip((s.stamp for s in q.scans), q.truth))
+        one = run_set(localizer, q.scans, truth)
+        print(_line(f'campus:{site.name}', 'ssm', one, split_of(site.name)), flush=True)
+        pooled.setdefault(split_of(site.name), []).extend(one.rows)
+        runs.append(one)
+    allrun = SetRun([r for x in runs for r in x.rows], [c for x in runs for c in x.covered],
+                    sum((x.stages for x in runs), Counter()),
+                    sum(x.spectral_found for x in runs))
+    print(_line('campus', 'ssm', allrun, 'mixed'), flush=True)
+    print(_breakdown(allrun), flush=True)
+    if args.campus_bags:
+        bag = write_query_bag(Path(args.campus_bags) / 'campus', campus.grid, queries)
+        print(f'  wrote {bag}', flush=True)
 
 
 def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cfg,

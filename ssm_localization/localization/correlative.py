@@ -24,8 +24,8 @@ import math
 import time
 
 import numpy as np
-from scipy import ndimage
 
+from ..mapping.distance import clamped_squared_distance
 from ..mapping.occupancy import OccupancyMap
 from ..transforms import wrap_angle
 
@@ -45,6 +45,7 @@ class CorrelativeResult:
     poses: np.ndarray
     scores: np.ndarray
     complete: bool
+    regions: np.ndarray | None = None       # (L,) the region of each leaf (regional search)
 
     @property
     def best_pose(self) -> tuple[float, float, float] | None:
@@ -80,27 +81,39 @@ class CorrelativeGrid:
         self.depth = int(depth)
         self.max_range = float(max_range)
         occ = occ_map.occupied_mask(occupied_thresh)
-        dist = (ndimage.distance_transform_edt(~occ) * occ_map.resolution if occ.any()
-                else np.full(occ.shape, np.inf))
-        lik = _block_reduce(np.round(_SCALE * np.exp(-0.5 * (dist / sigma) ** 2))
-                            .astype(np.uint8), coarsen, np.max)
+        lik = _block_reduce(likelihood_grid(occ, occ_map.resolution, sigma), coarsen, np.max)
+        del occ
         free = _block_reduce(occ_map.free_mask(free_thresh), coarsen, np.any)
         self.height, self.width = lik.shape
         h, w = lik.shape
-        # every point of a scan taken from inside the map lands within `pad` cells of it
+        # Layout of the level grids, flat: rows of `_left` cells, the map row, `pad` cells. Every
+        # point of a scan taken from inside the map lands within `pad` cells of it, so a point
+        # right of the map reads the padding of its row and one left of the `_left` cells wraps
+        # into the padding of the row before (both 0); the `_left` columns and `_top` rows hold
+        # the windows of the coarser levels that reach into the map from the left and from
+        # below. Points further below or above fall off the flat array, and the look-ups clip
+        # them to its first or last cell (both 0). Exactly the values of a grid padded by `pad`
+        # all round, at (h + 2^depth) (w + 2^depth + pad) cells instead of (h + 2 pad) (w + 2 pad).
+        # Within each row, level k is stored by phase: the cells of columns 0, 2^k, 2^(k+1), ...
+        # first, then those of columns 1, 2^k + 1, ... (the row's length a multiple of 2^depth).
+        # Windows of level k are anchored at multiples of 2^k, so one point's cells in a row of
+        # windows are neighbours in memory: the look-ups of a search stay in cache.
         self.pad = pad = (1 << self.depth) + int(math.ceil(self.max_range / self.resolution)) + 2
-        self._wp = w + 2 * pad
-        grid = np.zeros((h + 2 * pad, self._wp), np.uint8)
-        grid[pad:pad + h, pad:pad + w] = lik
-        anyfree = free.copy()
+        self._top = self._left = 1 << self.depth
+        self._wp = -(-(self._left + w + pad) // self._left) * self._left
+        grid = np.zeros((self._top + h, self._wp), np.uint8)
+        grid[self._top:, self._left:self._left + w] = lik
+        del lik
         self._levels = [grid.ravel()]
-        self._free = [anyfree]
         for k in range(1, self.depth + 1):
-            s = 1 << (k - 1)
-            grid = _window_max(grid, s)
-            anyfree = _window_max(anyfree, s)
-            self._levels.append(grid.ravel())
-            self._free.append(anyfree)
+            grid = _window_max(grid, 1 << (k - 1))
+            self._levels.append(_by_phase(grid, 1 << k))
+        # Windows of level k are only ever anchored at multiples of 2^k (the top level's tile
+        # the map, children split their parent), so whether a window holds a free cell is
+        # kept once per 2^k x 2^k block: 4/3 of a byte per cell for all levels together.
+        self._free = [free]
+        for k in range(1, self.depth + 1):
+            self._free.append(_block_reduce(self._free[-1], 2, np.any))
 
     # ------------------------------------------------------------------ geometry
     def _grid_yaws(self, yaws) -> np.ndarray:
@@ -128,7 +141,9 @@ class CorrelativeGrid:
     def search(self, points: np.ndarray, *, yaws=None, angular_step: float = math.radians(1.0),
                window: tuple[float, float, float, float] | None = None, min_score: float = 0.5,
                ratio: float = 1.0, max_leaves: int = 256, batch: int = 2048,
-               budget_s: float | None = None) -> CorrelativeResult:
+               budget_s: float | None = None,
+               regions: tuple[np.ndarray, np.ndarray] | None = None,
+               region_ratio: float | None = None) -> CorrelativeResult:
         """
         Best poses of the sensor for ``points`` (N, 2) given in the sensor frame.
 
@@ -139,6 +154,14 @@ class CorrelativeGrid:
         False) once that much time has passed. ``batch``: the most promising windows expanded per
         numpy step (larger batches: fewer Python steps, a little more work each; 2048 cut the
         search's p95 by a quarter on the real maps against 512, with the same answers).
+        ``regions``: ``(labels, allowed)``, the region of each top-level window (-1: none) and
+        which yaws are searched in which region ((K, R) bool): yaw ``k`` only in the windows of
+        the regions ``r`` with ``allowed[k, r]`` (``regions.py``); default: every yaw everywhere.
+        ``region_ratio`` (with ``regions``): besides the leaves within ``ratio`` of the best,
+        every region is searched down to its own best leaf as long as that scores
+        ``region_ratio`` of the best anywhere (a wall-dense region that matches every scan
+        fairly well cannot hide the other regions' best places); the result then says each
+        leaf's region.
         """
         t0 = time.perf_counter()
         pts = np.asarray(points, float).reshape(-1, 2)
@@ -150,7 +173,14 @@ class CorrelativeGrid:
         thetas = self._grid_yaws(yaws)
         if len(pts) == 0 or len(thetas) == 0:
             return _empty()
-        base = self._offsets(pts, thetas)
+        offsets = self._offsets(pts, thetas)
+        bases: dict[int, np.ndarray] = {}
+
+        def base(level: int) -> np.ndarray:
+            if level not in bases:
+                bases[level] = self._base(level, *offsets)
+            return bases[level]
+
         norm = 1.0 / (_SCALE * len(pts))
         r0, r1, c0, c1 = self._window_cells(window)
         if r0 >= r1 or c0 >= c1:
@@ -162,17 +192,39 @@ class CorrelativeGrid:
         ok = self._any_free(self.depth, rr, cc)
         rr, cc = rr[ok], cc[ok]
         n_k = len(thetas)
-        k = np.repeat(np.arange(n_k), len(rr))
-        r = np.tile(rr, n_k)
-        c = np.tile(cc, n_k)
-        ub = self._score(self.depth, base, k, r, c, norm)
+        if regions is None:
+            k = np.repeat(np.arange(n_k), len(rr))
+            r = np.tile(rr, n_k)
+            c = np.tile(cc, n_k)
+        else:
+            labels, allowed = regions
+            lab = labels[rr >> self.depth, cc >> self.depth]
+            pick = (lab >= 0)[None, :] & allowed[:, np.maximum(lab, 0)]
+            k, at = np.nonzero(pick)                # yaw-major, as above
+            r, c = rr[at], cc[at]
+        ub = self._score(self.depth, base(self.depth), k, r, c, norm)
         lev = np.full(len(k), self.depth, np.int8)
         best = -1.0
+        # per region: each region's best leaf (one region, the whole map, without regions)
+        labels = regions[0] if regions is not None and region_ratio is not None else None
+        n_reg = regions[1].shape[1] if labels is not None else 1
+        best_r = np.full(max(n_reg, 1), -1.0)
+        floor = region_ratio if labels is not None else ratio
+
+        def region(r, c):
+            return labels[r >> self.depth, c >> self.depth] if labels is not None else 0
+
+        def bound(r, c):
+            if labels is None:
+                return max(min_score, ratio * best)
+            # leaves within `ratio` of the best anywhere, and each region's own best
+            return np.maximum(max(min_score, floor * best),
+                              np.minimum(ratio * best, best_r[region(r, c)]))
+
         leaves: list[np.ndarray] = []
         complete = True
         while len(k):
-            bound = max(min_score, ratio * best)
-            keep = ub >= bound
+            keep = ub >= bound(r, c)
             k, r, c, lev, ub = k[keep], r[keep], c[keep], lev[keep], ub[keep]
             if not len(k):
                 break
@@ -197,27 +249,43 @@ class CorrelativeGrid:
                 inside = (cr < r1) & (cr + half > r0) & (cc_ < c1) & (cc_ + half > c0)
                 inside[inside] = self._any_free(int(level) - 1, cr[inside], cc_[inside])
                 ck, cr, cc_ = ck[inside], cr[inside], cc_[inside]
-                sc = self._score(int(level) - 1, base, ck, cr, cc_, norm)
+                sc = self._score(int(level) - 1, base(int(level) - 1), ck, cr, cc_, norm)
                 if level == 1:
-                    good = sc >= max(min_score, ratio * best)
+                    good = sc >= bound(cr, cc_)
                     if good.any():
                         leaves.append(np.column_stack((ck[good], cr[good], cc_[good], sc[good])))
                         best = max(best, float(sc[good].max()))
+                        if labels is not None:
+                            np.maximum.at(best_r, region(cr[good], cc_[good]), sc[good])
                 else:
                     new.append((ck, cr, cc_, np.full(len(ck), level - 1, np.int8), sc))
             k, r, c, lev, ub = (np.concatenate(a) for a in zip(*new))
         if not leaves:
             return _empty(complete)
         lv = np.concatenate(leaves)
-        lv = lv[lv[:, 3] >= max(min_score, ratio * best)]
-        lv = lv[np.argsort(-lv[:, 3], kind='stable')][:max_leaves]
+        rows_, cols_ = lv[:, 1].astype(np.int64), lv[:, 2].astype(np.int64)
+        lv = lv[lv[:, 3] >= bound(rows_, cols_)]
+        order = np.argsort(-lv[:, 3], kind='stable')
+        if labels is None:
+            lv = lv[order[:max_leaves]]
+            leaf_regions = None
+        else:
+            # the best leaves, and the best of each region however far down it ranks
+            lab = region(lv[order, 1].astype(np.int64), lv[order, 2].astype(np.int64))
+            first = np.zeros(len(order), bool)
+            first[np.unique(lab, return_index=True)[1]] = True
+            first[:max_leaves] = True
+            lv = lv[order[first]]
+            leaf_regions = lab[first]
         poses = self.poses_of(lv[:, 0].astype(int), lv[:, 1], lv[:, 2], thetas)
         if window is not None:      # the searched cells cover the box; keep what lies in it
             x0, y0, x1, y1 = window
             inside = ((poses[:, 0] >= x0) & (poses[:, 0] <= x1) & (poses[:, 1] >= y0)
                       & (poses[:, 1] <= y1))
             poses, lv = poses[inside], lv[inside]
-        return CorrelativeResult(poses=poses, scores=lv[:, 3], complete=complete)
+            leaf_regions = leaf_regions[inside] if leaf_regions is not None else None
+        return CorrelativeResult(poses=poses, scores=lv[:, 3], complete=complete,
+                                 regions=leaf_regions)
 
     def score_poses(self, points: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """Mean likelihood (level 0) of ``points`` (sensor frame) at each map-frame pose (P, 3)."""
@@ -235,32 +303,57 @@ class CorrelativeGrid:
         q = pts / self.resolution
         x = c[:, None] * q[None, :, 0] - s[:, None] * q[None, :, 1] + frac[:, 0:1] + 0.5
         y = s[:, None] * q[None, :, 0] + c[:, None] * q[None, :, 1] + frac[:, 1:2] + 0.5
-        pr = np.clip(np.floor(y).astype(np.int64) + rows[:, None], -self.pad, self.height
-                     + self.pad - 1)
-        pc = np.clip(np.floor(x).astype(np.int64) + cols[:, None], -self.pad, self.width
-                     + self.pad - 1)
-        vals = self._levels[0][(pr + self.pad) * self._wp + (pc + self.pad)]
+        pr = np.floor(y).astype(np.int64) + rows[:, None]
+        pc = np.floor(x).astype(np.int64) + cols[:, None]
+        inside = (pr >= 0) & (pr < self.height) & (pc >= 0) & (pc < self.width)
+        vals = np.where(inside, self._levels[0][np.where(inside, self._flat(pr, pc), 0)], 0)
         return vals.sum(axis=1, dtype=np.int64) / (_SCALE * len(pts))
 
     # ------------------------------------------------------------------ internals
-    def _offsets(self, pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
-        """Flat offsets (K, N) of each point's cell relative to the sensor cell, per yaw."""
+    def _offsets(self, pts: np.ndarray, thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Row and column offsets (K, N) of each point's cell from the sensor cell, per yaw."""
         c, s = np.cos(thetas), np.sin(thetas)
         q = pts / self.resolution
         x = c[:, None] * q[None, :, 0] - s[:, None] * q[None, :, 1] + 0.5
         y = s[:, None] * q[None, :, 0] + c[:, None] * q[None, :, 1] + 0.5
-        return np.floor(y).astype(np.int64) * self._wp + np.floor(x).astype(np.int64)
+        return np.floor(y).astype(np.int64), np.floor(x).astype(np.int64)
+
+    def _base(self, level: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Return the offsets of cells in level ``level``'s by-phase layout (see __init__)."""
+        period = 1 << level
+        return rows * self._wp + (cols % period) * (self._wp // period) + cols // period
+
+    def level_grid(self, level: int) -> np.ndarray:
+        """Return level ``level`` as a padded 2-D grid (rows and columns in map order)."""
+        period = 1 << level
+        rows = len(self._levels[level]) // self._wp
+        by_phase = self._levels[level].reshape(rows, period, self._wp // period)
+        return by_phase.transpose(0, 2, 1).reshape(rows, self._wp)
 
     def _score(self, level: int, base: np.ndarray, k, r, c, norm: float) -> np.ndarray:
         if len(k) == 0:
             return np.zeros(0)
-        cell = (np.asarray(r) + self.pad) * self._wp + (np.asarray(c) + self.pad)
+        # windows of this level are anchored at multiples of 2^level (see _base)
+        cell = ((np.asarray(r) + self._top) * self._wp
+                + ((np.asarray(c) + self._left) >> level))
         flat = np.take(base, k, axis=0)         # (M, N) cells of the points; take and an
         flat += cell[:, None]                   # in-place add: a quarter faster than indexing
-        return np.take(self._levels[level], flat).sum(axis=1, dtype=np.int32) * norm
+        # points above or below the padded grid fall off the flat array: its first and last
+        # cells are padding (0)
+        return np.take(self._levels[level], flat, mode='clip').sum(axis=1,
+                                                                   dtype=np.int32) * norm
+
+    def _flat(self, r, c):
+        """Flat index of map cells ``(r, c)`` (may lie in the padding) in the level grids."""
+        return (r + self._top) * self._wp + (c + self._left)
+
+    def free_windows(self) -> np.ndarray:
+        """Return which top-level windows (anchored at multiples of 2^depth) hold a free cell."""
+        return self._free[self.depth]
 
     def _any_free(self, level: int, r, c) -> np.ndarray:
-        return self._free[level][np.asarray(r), np.asarray(c)]
+        """Tell whether the windows of ``level`` anchored at ``(r, c)`` hold a free cell."""
+        return self._free[level][np.asarray(r) >> level, np.asarray(c) >> level]
 
     def _window_cells(self, window) -> tuple[int, int, int, int]:
         """Grid rows/cols ``[r0, r1) x [c0, c1)`` of the sensor positions to search."""
@@ -274,6 +367,33 @@ class CorrelativeGrid:
         return max(int(r0), 0), min(int(r1), h), max(int(c0), 0), min(int(c1), w)
 
 
+def likelihood_grid(occupied: np.ndarray, resolution: float, sigma: float) -> np.ndarray:
+    """
+    Return ``round(255 exp(-d^2 / 2 sigma^2))`` (uint8) per cell, ``d`` its distance (m) to walls.
+
+    ``d`` is measured between cell centres to the nearest ``occupied`` cell. The value is 0
+    beyond a few sigma, so distances are computed only that far (``mapping.distance``: exact
+    squared distances, clamped) and turned into values by a table of every squared distance up
+    to there: the same numbers as from the full distance transform, at a few bytes per cell.
+    """
+    table = _likelihood_table(resolution, sigma)
+    limit = math.isqrt(len(table) - 1)
+    k = clamped_squared_distance(occupied, limit, np.int32)
+    return table[k]
+
+
+def _likelihood_table(resolution: float, sigma: float) -> np.ndarray:
+    """Return the likelihood (uint8) of each squared distance (cells^2), 0 at the last entry."""
+    # exp(-d^2 / 2 sigma^2) < 0.5 / 255 beyond sigma * sqrt(2 ln 510)
+    limit = int(math.ceil(sigma * math.sqrt(2.0 * math.log(2.0 * _SCALE)) / resolution)) + 1
+    k = np.arange(limit * limit + 1, dtype=np.float64)
+    dist = np.sqrt(k) * resolution
+    table = np.round(_SCALE * np.exp(-0.5 * (dist / sigma) ** 2)).astype(np.uint8)
+    if table[-1] != 0:
+        raise ValueError('likelihood table: the last entry must be 0')
+    return table
+
+
 def _block_reduce(a: np.ndarray, f: int, op) -> np.ndarray:
     """``op`` over the ``f x f`` blocks of ``a`` (the last ones may be partial)."""
     if f == 1:
@@ -282,6 +402,13 @@ def _block_reduce(a: np.ndarray, f: int, op) -> np.ndarray:
     pad = np.zeros(((h + f - 1) // f * f, (w + f - 1) // f * f), a.dtype)
     pad[:h, :w] = a
     return op(pad.reshape(pad.shape[0] // f, f, pad.shape[1] // f, f), axis=(1, 3))
+
+
+def _by_phase(grid: np.ndarray, period: int) -> np.ndarray:
+    """Return ``grid`` (rows a multiple of ``period`` long) flat, each row's columns by phase."""
+    rows, cols = grid.shape
+    return np.ascontiguousarray(grid.reshape(rows, cols // period, period).transpose(0, 2, 1)
+                                ).reshape(-1)
 
 
 def _window_max(grid: np.ndarray, s: int) -> np.ndarray:

@@ -43,22 +43,23 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .confidence import confidence
-from .correlative import CorrelativeGrid
 from .evidence import beam_fractions, covariance_stds, endpoint_evidence, Evidence
 from .fusion import lever_arm_covariance
-from .refine import refine_poses, SurfaceModel
+from .map_layers import build_map_layers
+from .refine import refine_poses
+from .regions import pick_leaves, REGION_RATIO, SearchPlan, with_region_bests
 from .verify import BeamCheck, check_beams
-from .voting import alignment_yaws, PoseVoting, Votes
+from .voting import alignment_yaws, Votes
 from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
 from ..config.localization import LocalizerConfig
 from ..mapping.index import MapIndex
-from ..mapping.raycast import RayCaster
 from ..matching.features import prepare_scan, ScanFeatures
 from ..matching.matcher import match_features, spectral_score, spectral_solution
 from ..matching.pairwise import affinity_matrix, angle_table, distance_table
 from ..matching.ransac import ransac_hypotheses
 from ..matching.scan import MAX_RANGE, ranges_to_points
 from ..matching.spectral import binarize, leading_eigenvector, matching_score
+from ..progress import LayerHook, no_layers
 from ..transforms import apply, compose, inverse, Pose2, wrap_angle
 
 #: the statuses of an answer: confident, several places fit (or too little evidence), no estimate
@@ -221,24 +222,18 @@ class GlobalLocalizer:
     """
 
     def __init__(self, index: MapIndex, config: LocalizerConfig | None = None,
-                 confidence_model: ConfidenceModel = CONFIDENCE_MODEL):
+                 confidence_model: ConfidenceModel = CONFIDENCE_MODEL,
+                 layer: LayerHook = no_layers):
         self.index = index
         self.config = cfg = config or LocalizerConfig()
         self.confidence_model = confidence_model
         self.matcher_config = index.config.matcher
         if len(index.features) == 0:
             raise ValueError('the map index has no nodes: nothing to localize against')
-        m = index.map
-        occupied = m.occupied_mask(index.config.occupied_thresh)
-        self.grid = CorrelativeGrid(m, occupied_thresh=index.config.occupied_thresh,
-                                    sigma=cfg.search_sigma, depth=cfg.search_depth,
-                                    max_range=cfg.max_cast_range,
-                                    coarsen=max(1, round(cfg.search_cell / m.resolution)))
-        self.surface = SurfaceModel.from_occupancy(occupied, m.resolution, m.origin,
-                                                   cfg.surface_depth)
-        self.caster = RayCaster(occupied, m.resolution, m.origin)
-        self.voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw,
-                                 search_dims=cfg.vote_descriptor_dims)
+        layers = build_map_layers(index, cfg, layer)
+        self.grid, self.surface = layers.grid, layers.surface
+        self.caster, self.voting = layers.caster, layers.voting
+        self.regions = layers.regions
         self._map_spectrum = np.fft.fft(self.voting.orientation_histogram())
         self._base_from_laser = inverse(cfg.laser_pose)
         self._paper_config = dataclasses.replace(self.matcher_config, icp=False, polish=False,
@@ -328,19 +323,19 @@ class GlobalLocalizer:
         if self.config.search:
             seeds = _by_correlation(hyps)
             found = self.search_hypotheses(
-                query, self.search_yaws(query, [h.initial_pose[2] for h in seeds]))
+                query, self.search_plan(query, [h.initial_pose for h in seeds]))
             hyps += self.correlate(query, found)        # scored as the spectral ones are
             clock.lap('search')
         if not hyps:
             return self._failed(clock, 'no pose hypothesis: neither the pose votes nor the '
                                        'correlative search found a place that fits')
         ranked = _by_correlation(hyps)
-        limit = self.config.refine_hypotheses
-        refined = self.refine(query, ranked, limit)
+        todo = self.to_refine(ranked)
+        refined = self.refine(query, todo, len(todo))
         clock.lap('refine')
         verified = self.verify_contenders(query, refined)
         clock.lap('verify')
-        return self.decide(query, verified, clock, others=ranked[limit:])
+        return self.decide(query, verified, clock, others=[h for h in ranked if h not in todo])
 
     # -- stages -----------------------------------------------------------------------------
     def spectral_hypotheses(self, query: Query,
@@ -395,30 +390,40 @@ class GlobalLocalizer:
         sel = binarize(x, pairs, mc.binarize_min_ratio)
         return sel, matching_score(g, sel)
 
-    def search_hypotheses(self, query: Query, yaws: np.ndarray,
+    def search_hypotheses(self, query: Query, yaws: np.ndarray | SearchPlan,
                           window: tuple[float, float, float, float] | None = None
                           ) -> list[Hypothesis]:
         """
         Correlative branch and bound over the whole map (or ``window``) at the given ``yaws``.
 
-        At most ``search_keep`` distinct leaves, best first (see :meth:`search_yaws`).
+        ``yaws`` may be a :class:`~.regions.SearchPlan` (each yaw in its regions, see
+        :meth:`search_plan`). At most ``search_keep`` distinct leaves, best first (see
+        :meth:`search_yaws`).
         """
         cfg = self.config
+        plan = yaws if isinstance(yaws, SearchPlan) and yaws.allowed.shape[1] > 1 else None
+        yaws = yaws.yaws if isinstance(yaws, SearchPlan) else yaws
         if len(yaws) == 0:
             return []
         pts = _evenly(query.features.points, cfg.search_points)
         found = self.grid.search(pts, yaws=yaws, window=window, min_score=cfg.search_min_score,
-                                 ratio=cfg.search_ratio, budget_s=cfg.search_budget)
-        out: list[Hypothesis] = []
-        for pose, score in zip(found.poses, found.scores):
-            pose = tuple(float(v) for v in pose)
-            if any(not distinct(pose, h.initial_pose, cfg.vote_bin_xy, cfg.search_step * 3)
-                   for h in out):
-                continue
-            out.append(Hypothesis(source='search', initial_pose=pose, correlative=float(score)))
-            if len(out) >= cfg.search_keep:
-                break
-        return out
+                                 ratio=cfg.search_ratio, budget_s=cfg.search_budget,
+                                 regions=plan.regions if plan is not None else None,
+                                 region_ratio=REGION_RATIO if plan is not None else None)
+        return [Hypothesis(source='search', initial_pose=tuple(float(v) for v in found.poses[i]),
+                           correlative=float(found.scores[i]))
+                for i in pick_leaves(found, cfg.search_keep, lambda a, b: not distinct(
+                    a, b, cfg.vote_bin_xy, cfg.search_step * 3))]
+
+    def search_plan(self, query: Query, seeds: list[Pose2]) -> SearchPlan:
+        """
+        Return where to search at which yaws: :meth:`search_yaws`, region by region.
+
+        ``seeds``: laser poses of the best hypotheses, best first (``regions.py``).
+        """
+        feats = query.features
+        scan_angles = np.arctan2(feats.tangents[:, 1], feats.tangents[:, 0])
+        return self.regions.plan(scan_angles, seeds, self.config)
 
     def search_yaws(self, query: Query, yaws) -> np.ndarray:
         """
@@ -454,16 +459,26 @@ class GlobalLocalizer:
                                        np.array([h.initial_pose for h in hyps]))
         return [replace(h, correlative=float(s)) for h, s in zip(hyps, scores)]
 
+    def to_refine(self, ranked: list[Hypothesis]) -> list[Hypothesis]:
+        """
+        Return the hypotheses worth refining: the first ``refine_hypotheses`` of ``ranked``.
+
+        On a map of several regions also the first hypothesis of each region those leave out
+        and every one the search found (its rivals; ``regions.py``).
+        """
+        return with_region_bests(self.regions, ranked, self.config.refine_hypotheses,
+                                 lambda h: h.initial_pose, lambda h: 'search' in h.found_by)
+
     def refine(self, query: Query, hyps: list[Hypothesis],
                limit: int | None = None) -> list[Hypothesis]:
         """
         Return the first ``limit`` hypotheses refined on the wall surface (batched).
 
-        ``limit`` defaults to ``refine_hypotheses``; those that meet are merged; best explained
-        first.
+        ``limit`` defaults to :meth:`to_refine`'s choice; those that meet are merged; best
+        explained first.
         """
         cfg = self.config
-        todo = hyps[:cfg.refine_hypotheses if limit is None else limit]
+        todo = hyps[:limit] if limit is not None else self.to_refine(hyps)
         if not todo:
             return []
         results = refine_poses(self.surface, query.features.points,

@@ -17,14 +17,37 @@ cost about half a cell of accuracy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
-from scipy import ndimage
 
+from ..mapping.distance import feature_transform, squared_distances
 from ..transforms import Pose2, rotation, wrap_angle
 
 #: lattice points per cell side of the precomputed signed distance
 SUBDIVISION = 2
+#: side of the lattice's tiles, lattice points (a power of two)
+TILE = 32
+_TILE_SHIFT = TILE.bit_length() - 1
+#: tiles of a block of the build (the distance transforms run one block, plus its halo, at a time)
+_BLOCK_TILES = 48
+#: ``exp(-x^2 / 2)`` is exactly 0.0 in float64 beyond this x (``exp(-746)`` underflows)
+EXP_UNDERFLOW = math.sqrt(2.0 * 746.0)
+#: the tile table's ids of the two constant tiles: every point at least ``reach`` outside the
+#: walls, every point at least ``reach`` inside them
+FAR, DEEP = 0, 1
+
+
+def exact_reach(score_sigma: float = 0.05, truncate: float = 0.3) -> float:
+    """
+    Return how far (m) from the wall surface its stored distance must be exact.
+
+    Every use of it then gives the same numbers as an unclamped one: Gauss-Newton uses only the
+    residuals within its first truncation radius ``truncate``, the evidence its fractions within
+    0.15 m, and the explained fraction ``exp(-r^2 / 2 score_sigma^2)`` is exactly 0.0 in float64
+    beyond :data:`EXP_UNDERFLOW` sigmas.
+    """
+    return max(EXP_UNDERFLOW * float(score_sigma), float(truncate), 0.15)
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,35 +55,96 @@ class SurfaceModel:
     """
     Signed distance to the boundary of occupied cells, shifted by ``depth`` metres.
 
-    The exact distance is precomputed on a lattice of half-cell spacing (``lattice``, float32, in
-    cells): the closest point of a union of lattice-aligned boxes to a lattice point is itself a
-    lattice point, so two Euclidean distance transforms give it exactly. Between lattice points it
-    is interpolated bilinearly (exact along straight axis-aligned walls, within a few hundredths of
-    a cell near corners), which makes a query four table look-ups per point.
+    The exact distance is precomputed on a lattice of half-cell spacing: the closest point of a
+    union of lattice-aligned boxes to a lattice point is itself a lattice point, so its squared
+    distance in lattice units is an integer ``k``, and two Euclidean distance transforms give
+    it exactly. Between lattice points it is interpolated bilinearly (exact along straight
+    axis-aligned walls, within a few hundredths of a cell near corners), which makes a query
+    four table look-ups per point.
+
+    Storage grows with the walls, not with the map: ``k`` is stored signed (negative inside
+    walls) as int16 (int32 if the reach needs it), exact up to ``reach`` metres from the
+    surface and clamped beyond (see :func:`exact_reach`: no use of the model can tell); the
+    lattice is cut into :data:`TILE` x :data:`TILE` tiles (stored with one more row and column
+    so that the four corners of a look-up lie in one tile), and a tile that lies wholly beyond
+    the reach outside the walls (open space, unknown space between buildings) or inside them is
+    not stored: the tile table points it at one shared constant tile. A table of the float32
+    distance of every stored ``k`` turns codes into the very values of a dense float32 lattice.
     """
 
     origin: Pose2
     resolution: float
-    lattice: np.ndarray         # (2H + 1, 2W + 1) float32 signed distance in cells
     depth: float                # metres behind the occupied-cell boundary where the surface lies
+    shape: tuple[int, int]      # (2H + 1, 2W + 1) lattice points
+    tiles: np.ndarray           # (tile rows, tile cols) int32: the stored tile of each tile
+    codes: np.ndarray           # (tiles * (TILE + 1)^2,) signed squared distances, lattice units
+    values: np.ndarray          # (2 cap + 1,) float32 signed distance in cells of code - cap
+    cap: int                    # the largest stored |code| (the clamp)
 
     @classmethod
     def from_occupancy(cls, occupied: np.ndarray, resolution: float, origin: Pose2,
-                       surface_depth_cells: float = 0.5) -> 'SurfaceModel':
+                       surface_depth_cells: float = 0.5,
+                       reach: float | None = None) -> 'SurfaceModel':
+        """
+        Return the model of the ``occupied`` cells, exact within ``reach`` metres of walls.
+
+        ``reach`` defaults to :func:`exact_reach` of the localizer's defaults.
+        """
         occupied = np.asarray(occupied, dtype=bool)
         if not occupied.any():
             raise ValueError('map has no occupied cells: nothing to refine against')
-        fine = np.repeat(np.repeat(occupied, SUBDIVISION, axis=0), SUBDIVISION, axis=1)
-        # a lattice point touches the occupied (free) region when one of its 4 sub-cells does
-        occ_v = _touches(fine)
-        free_v = _touches(~fine)
-        outside = ndimage.distance_transform_edt(~occ_v)
-        inside = (ndimage.distance_transform_edt(~free_v) if free_v.any()
-                  else np.full(occ_v.shape, float(max(occ_v.shape))))
-        sdf = np.where(occ_v & free_v, 0.0, np.where(occ_v, -inside, outside)) / SUBDIVISION
-        return cls(origin=tuple(float(v) for v in origin), resolution=float(resolution),
-                   lattice=sdf.astype(np.float32),
-                   depth=float(surface_depth_cells) * float(resolution))
+        res = float(resolution)
+        reach = exact_reach() if reach is None else float(reach)
+        # clamp in lattice units: exact wherever an interpolated value, shifted by at most a
+        # cell of wall offset, can lie within reach (corners within 0.71 cells of the point)
+        limit = int(math.ceil(SUBDIVISION * (reach / res + 1.71))) + 1
+        cap = limit * limit
+        # codes + cap index the value table: int16 while that sum fits
+        dtype = np.int16 if 2 * cap <= np.iinfo(np.int16).max else np.int32
+        h, w = occupied.shape
+        shape = (SUBDIVISION * h + 1, SUBDIVISION * w + 1)
+        n_ti = -(-(shape[0] - 1) // TILE)
+        n_tj = -(-(shape[1] - 1) // TILE)
+        tiles = np.empty((n_ti, n_tj), dtype=np.int32)
+        side = TILE + 1
+        stored = [np.full((1, side, side), cap, dtype), np.full((1, side, side), -cap, dtype)]
+        count = 2
+        for ti0 in range(0, n_ti, _BLOCK_TILES):
+            for tj0 in range(0, n_tj, _BLOCK_TILES):
+                nti, ntj = min(_BLOCK_TILES, n_ti - ti0), min(_BLOCK_TILES, n_tj - tj0)
+                i0, j0 = ti0 * TILE, tj0 * TILE
+                q = _signed_codes(occupied, i0, i0 + nti * TILE + 1, j0, j0 + ntj * TILE + 1,
+                                  limit, dtype)
+                rs, cs = q.strides
+                view = np.lib.stride_tricks.as_strided(
+                    q, (nti, ntj, side, side), (TILE * rs, TILE * cs, rs, cs), writeable=False)
+                far = (view == cap).all(axis=(2, 3))
+                deep = (view == -cap).all(axis=(2, 3))
+                keep = ~far & ~deep
+                ids = np.where(far, FAR, DEEP).astype(np.int32)
+                ids[keep] = count + np.arange(int(keep.sum()), dtype=np.int32)
+                count += int(keep.sum())
+                if keep.any():
+                    stored.append(view[keep])
+                tiles[ti0:ti0 + nti, tj0:tj0 + ntj] = ids
+        codes = np.concatenate(stored).reshape(-1)
+        k = np.arange(-cap, cap + 1, dtype=np.int64)
+        values = ((np.sign(k) * np.sqrt(np.abs(k).astype(np.float64))) / SUBDIVISION).astype(
+            np.float32)
+        return cls(origin=tuple(float(v) for v in origin), resolution=res,
+                   depth=float(surface_depth_cells) * res, shape=shape, tiles=tiles,
+                   codes=codes, values=values, cap=cap)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the model's arrays."""
+        return int(self.tiles.nbytes + self.codes.nbytes + self.values.nbytes)
+
+    def lattice_values(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Return the signed distance (float32, cells) at lattice points ``(i, j)`` (in range)."""
+        tid = self.tiles[i >> _TILE_SHIFT, j >> _TILE_SHIFT].astype(np.int64)
+        k = tid * (TILE + 1) ** 2 + (i & (TILE - 1)) * (TILE + 1) + (j & (TILE - 1))
+        return self.values[self.codes[k].astype(np.int64) + self.cap]
 
     def signed_distance(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
@@ -72,7 +156,7 @@ class SurfaceModel:
         rot = rotation(oyaw)
         scale = SUBDIVISION / self.resolution
         g = (np.asarray(pts, float).reshape(-1, 2) - (ox, oy)) @ rot * scale
-        h, w = self.lattice.shape
+        h, w = self.shape
         j0 = np.floor(g[:, 0]).astype(np.int64)
         i0 = np.floor(g[:, 1]).astype(np.int64)
         valid = (j0 >= 0) & (j0 < w - 1) & (i0 >= 0) & (i0 < h - 1)
@@ -82,9 +166,15 @@ class SurfaceModel:
             return s, grad, valid
         i, j = i0[valid], j0[valid]
         fx, fy = g[valid, 0] - j, g[valid, 1] - i
-        flat = self.lattice.ravel()
-        k = i * w + j
-        a, b, c, d = flat[k], flat[k + 1], flat[k + w], flat[k + w + 1]
+        # the four corners lie in the tile of (i, j), which holds one more row and column
+        tid = self.tiles[i >> _TILE_SHIFT, j >> _TILE_SHIFT].astype(np.int64)
+        side = TILE + 1
+        k = tid * side * side + (i & (TILE - 1)) * side + (j & (TILE - 1))
+        codes, values, cap = self.codes, self.values, self.cap
+        a = values[codes[k] + cap]
+        b = values[codes[k + 1] + cap]
+        c = values[codes[k + side] + cap]
+        d = values[codes[k + side + 1] + cap]
         bottom = a + fx * (b - a)
         top = c + fx * (d - c)
         s[valid] = (bottom + fy * (top - bottom)) * self.resolution + self.depth
@@ -108,10 +198,73 @@ class SurfaceModel:
         return e.mean(axis=-1) if shape[-1] else np.zeros(shape[:-1])
 
 
+def _signed_codes(occupied: np.ndarray, i0: int, i1: int, j0: int, j1: int, limit: int,
+                  dtype) -> np.ndarray:
+    """
+    Return the signed squared distances (lattice units) of lattice rows ``i0:i1``, cols ``j0:j1``.
+
+    ``+k`` outside the walls (to the nearest lattice point touching an occupied sub-cell),
+    ``-k`` inside (to the nearest touching a free one), 0 on the boundary (touching both);
+    clamped at ``limit^2`` (beyond the limit inside: ``-limit^2``). Points beyond the lattice
+    hold the clamp. Computed on the block plus a halo of ``limit`` lattice points, so every
+    distance up to the limit is exact.
+    """
+    h, w = occupied.shape
+    lh, lw = SUBDIVISION * h + 1, SUBDIVISION * w + 1
+    cap = limit * limit
+    out = np.full((i1 - i0, j1 - j0), cap, dtype=dtype)
+    bi1, bj1 = min(i1, lh), min(j1, lw)
+    if bi1 <= i0 or bj1 <= j0:
+        return out
+    # the window: block plus halo, in lattice points, within the lattice
+    wi0, wi1 = max(i0 - limit, 0), min(bi1 + limit, lh)
+    wj0, wj1 = max(j0 - limit, 0), min(bj1 + limit, lw)
+    occ_v, free_v = _lattice_masks(occupied, wi0, wi1, wj0, wj1)
+    # The nearest occupied point of a point outside the walls is a boundary point (it touches
+    # a free sub-cell too: the straight line to it crosses free sub-cells only, the grid being
+    # convex), and so is the nearest free point of a point inside them: one transform to the
+    # boundary gives both distances.
+    boundary = occ_v & free_v
+    rows, cols = slice(i0 - wi0, bi1 - wi0), slice(j0 - wj0, bj1 - wj0)
+    block = out[:bi1 - i0, :bj1 - j0]
+    if boundary.any():
+        ft = feature_transform(boundary)
+        block[...] = np.minimum(squared_distances(ft, rows.start, rows.stop, cols.start,
+                                                  cols.stop), cap)
+        del ft
+    inside = occ_v[rows, cols] & ~free_v[rows, cols]
+    block[inside] = -block[inside]
+    return out
+
+
+def _lattice_masks(occupied: np.ndarray, i0: int, i1: int, j0: int,
+                   j1: int) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Lattice points ``i0:i1, j0:j1`` touching an occupied / a free sub-cell.
+
+    Lattice point (i, j) touches the sub-cells (i - 1 .. i, j - 1 .. j) of the grid divided
+    :data:`SUBDIVISION` times; outside the grid there is neither.
+    """
+    h, w = occupied.shape
+    # sub-cell rows i0 - 1 .. i1 - 1, columns j0 - 1 .. j1 - 1 (outside the grid: neither)
+    occ = np.zeros((i1 - i0 + 1, j1 - j0 + 1), dtype=bool)
+    known = np.zeros_like(occ)
+    sr0, sr1 = max(i0 - 1, 0), min(i1, SUBDIVISION * h)
+    sc0, sc1 = max(j0 - 1, 0), min(j1, SUBDIVISION * w)
+    if sr1 > sr0 and sc1 > sc0:
+        sub_r = np.arange(sr0, sr1) // SUBDIVISION
+        sub_c = np.arange(sc0, sc1) // SUBDIVISION
+        cells = occupied[sub_r[0]:sub_r[-1] + 1, sub_c[0]:sub_c[-1] + 1]
+        occ[sr0 - (i0 - 1):sr1 - (i0 - 1), sc0 - (j0 - 1):sc1 - (j0 - 1)] = \
+            cells[sub_r - sub_r[0]][:, sub_c - sub_c[0]]
+        known[sr0 - (i0 - 1):sr1 - (i0 - 1), sc0 - (j0 - 1):sc1 - (j0 - 1)] = True
+    free = known & ~occ
+    return _touches(occ), _touches(free)
+
+
 def _touches(mask: np.ndarray) -> np.ndarray:
-    """(H + 1, W + 1) lattice points with at least one of their four cells in ``mask``."""
-    pad = np.pad(mask, 1, constant_values=False)
-    return pad[:-1, :-1] | pad[:-1, 1:] | pad[1:, :-1] | pad[1:, 1:]
+    """Lattice points with one of their four sub-cells in ``mask`` (one fewer each way)."""
+    return mask[:-1, :-1] | mask[:-1, 1:] | mask[1:, :-1] | mask[1:, 1:]
 
 
 @dataclass(frozen=True)

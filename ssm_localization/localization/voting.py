@@ -128,7 +128,7 @@ class PoseVoting:
 
         Modulo a half turn, ``bins`` bins, from the tangents of the pooled features.
         """
-        return _direction_histogram(self.angles, bins)
+        return direction_histogram(self.angles, bins)
 
     def vote(self, query: ScanFeatures) -> Votes:
         """
@@ -212,7 +212,7 @@ class PoseVoting:
         return out
 
 
-def _direction_histogram(angles: np.ndarray, bins: int) -> np.ndarray:
+def direction_histogram(angles: np.ndarray, bins: int) -> np.ndarray:
     """Return normalized histogram of line directions (angles modulo pi), smoothed over +-1 bin."""
     b = np.floor(np.mod(angles, math.pi) / math.pi * bins).astype(np.int64) % bins
     h = np.bincount(b, minlength=bins).astype(float)
@@ -229,7 +229,7 @@ def alignment_yaws(map_spectrum: np.ndarray, scan_angles: np.ndarray, count: int
     computed once per map.
     """
     bins = len(map_spectrum)
-    scan_hist = _direction_histogram(scan_angles, bins)
+    scan_hist = direction_histogram(scan_angles, bins)
     corr = np.real(np.fft.ifft(map_spectrum * np.conj(np.fft.fft(scan_hist))))
     peaks = np.flatnonzero((corr >= np.roll(corr, 1)) & (corr >= np.roll(corr, -1)))
     peaks = peaks[np.argsort(-corr[peaks], kind='stable')][:count]

@@ -27,7 +27,7 @@ from ..config.mapping import IndexConfig
 from ..files.reading import clip, input_file
 from ..files.writing import atomic_files
 from ..matching.features import prepare_scan, ScanFeatures
-from ..progress import ProgressCallback
+from ..progress import LayerHook, no_layers, ProgressCallback
 from ..transforms import compose
 
 #: Version of the ``.npz`` layout written by :func:`save_index`; other versions are refused.
@@ -74,9 +74,19 @@ class MapIndex:
         return count_kinds(self.node_kind)
 
 
+#: names of the layers :func:`build_index` builds, in order
+INDEX_LAYERS = ('topology', 'virtual scans', 'features')
+
+
 def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
-                progress: ProgressCallback | None = None) -> MapIndex:
-    """Nodes, virtual scans and their matcher features for ``occ_map`` (paper section III)."""
+                progress: ProgressCallback | None = None,
+                layer: LayerHook = no_layers) -> MapIndex:
+    """
+    Nodes, virtual scans and their matcher features for ``occ_map`` (paper section III).
+
+    ``layer`` is told when each of :data:`INDEX_LAYERS` is built (``bench index`` measures
+    their memory); the intermediates of each are released before the next starts.
+    """
     cfg = config or IndexConfig()
     if not isinstance(occ_map, OccupancyMap):
         raise ValueError(f'build_index: expected an OccupancyMap, got {type(occ_map).__name__}')
@@ -86,33 +96,41 @@ def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
         # one 0..100 scale over the stages: topology 0-30, scans 30-60, features 60-100
         user(lo + (hi - lo) * done // max(total, 1), 100, label)
 
-    topo = build_topology(occ_map, cfg.topology,
-                          lambda d, t, label: report(d, t, f'topology ({label})', 0, 30))
-    k = len(topo)
-    poses = np.array([compose((float(x), float(y), 0.0), cfg.sensor_pose)
-                      for x, y in topo.node_xy], dtype=float).reshape(-1, 3)
-    angles = _beam_angles(cfg.beams)
-    caster = RayCaster(occ_map.occupied_mask(cfg.occupied_thresh), occ_map.resolution,
-                       occ_map.origin)
-    ranges = np.full((k, len(angles)), np.inf)
-    chunk = 128
-    for s in range(0, k, chunk):
-        report(s, k, 'virtual scans', 30, 60)
-        ranges[s:s + chunk] = caster.cast(poses[s:s + chunk], angles, cfg.max_range)
-    cos, sin = np.cos(angles), np.sin(angles)
-    features = []
-    for i in range(k):
-        if i % 16 == 0:
-            report(i, k, 'features', 60, 100)
-        ok = np.isfinite(ranges[i])
-        pts = np.column_stack((ranges[i, ok] * cos[ok], ranges[i, ok] * sin[ok]))
-        features.append(prepare_scan(pts, cfg.matcher))
+    with layer(INDEX_LAYERS[0]):
+        topo = build_topology(occ_map, cfg.topology,
+                              lambda d, t, label: report(d, t, f'topology ({label})', 0, 30))
+        # what the index keeps of it (not the clearance of every cell)
+        node_xy, node_kind, gvd_mask = topo.node_xy, topo.node_kind, topo.gvd_mask
+        edges, node_clearance = topo.edges, topo.node_clearance
+        del topo
+    k = len(node_xy)
+    with layer(INDEX_LAYERS[1]):
+        poses = np.array([compose((float(x), float(y), 0.0), cfg.sensor_pose)
+                          for x, y in node_xy], dtype=float).reshape(-1, 3)
+        angles = _beam_angles(cfg.beams)
+        caster = RayCaster(occ_map.occupied_mask(cfg.occupied_thresh), occ_map.resolution,
+                           occ_map.origin)
+        ranges = np.full((k, len(angles)), np.inf)
+        chunk = 128
+        for s in range(0, k, chunk):
+            report(s, k, 'virtual scans', 30, 60)
+            ranges[s:s + chunk] = caster.cast(poses[s:s + chunk], angles, cfg.max_range)
+        del caster
+    with layer(INDEX_LAYERS[2]):
+        cos, sin = np.cos(angles), np.sin(angles)
+        features = []
+        for i in range(k):
+            if i % 16 == 0:
+                report(i, k, 'features', 60, 100)
+            ok = np.isfinite(ranges[i])
+            pts = np.column_stack((ranges[i, ok] * cos[ok], ranges[i, ok] * sin[ok]))
+            features.append(prepare_scan(pts, cfg.matcher))
     report(k, k, 'done')
-    return MapIndex(map=occ_map, node_xy=topo.node_xy, node_kind=topo.node_kind,
+    return MapIndex(map=occ_map, node_xy=node_xy, node_kind=node_kind,
                     node_sensor_pose=poses, ranges=ranges, beam_angles=angles,
-                    features=features, gvd_mask=topo.gvd_mask, config=cfg,
+                    features=features, gvd_mask=gvd_mask, config=cfg,
                     map_checksum=occ_map.checksum(), version=FORMAT_VERSION,
-                    edges=topo.edges, node_clearance=topo.node_clearance)
+                    edges=edges, node_clearance=node_clearance)
 
 
 # --------------------------------------------------------------------------- npz storage

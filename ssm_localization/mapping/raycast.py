@@ -12,7 +12,8 @@ from dataclasses import dataclass, fields
 import math
 
 import numpy as np
-from scipy import ndimage
+
+from .distance import clamped_squared_distance
 
 
 @dataclass
@@ -59,6 +60,33 @@ class _Rays:
 _RAY_FIELDS = tuple(f.name for f in fields(_Rays))
 
 
+#: the caster's cell codes (uint16, one per cell of the padded grid): a free cell holds its
+#: squared distance to the nearest occupied cell (cells^2) up to :data:`SKIP_CAP`
+OCCUPIED = 0xFFFF
+OUTSIDE = 0xFFFE
+#: squared distances are exact up to 255^2 cells^2 (12.75 m at 0.05 m) and clamped there: a
+#: cell further from every wall jumps 255 - sqrt(2) cells at a time instead of further
+SKIP_CAP = 255 * 255
+#: the jump subtracted from a cell's distance to the nearest occupied cell centre
+_SKIP_MARGIN = np.float32(math.sqrt(2.0) + 1e-3)
+
+
+def skip_table(no_walls: bool = False) -> np.ndarray:
+    """
+    Return the safe jump (float32, cells) of each cell code: ``max(D - sqrt(2), 0)`` (a hair more).
+
+    ``D`` is the distance of a free cell's centre to the nearest occupied cell centre (the code
+    is ``D^2``, exact up to :data:`SKIP_CAP`); occupied and outside cells do not jump.
+    ``no_walls``: the grid has no occupied cell, so the capped code jumps to the end at once.
+    """
+    codes = np.arange(SKIP_CAP + 1, dtype=np.float64)
+    table = np.zeros(1 << 16, dtype=np.float32)
+    table[:SKIP_CAP + 1] = np.maximum(np.sqrt(codes).astype(np.float32) - _SKIP_MARGIN, 0)
+    if no_walls:
+        table[SKIP_CAP] = np.inf
+    return table
+
+
 class RayCaster:
     """
     Ray casting on one grid; precomputes the padded grid and its distance transform once.
@@ -68,6 +96,10 @@ class RayCaster:
     for a cell whose centre is ``D`` cells from the nearest occupied cell centre), then resumes
     the exact traversal, so the result is the same as the plain traversal, only faster.
     ``accelerate=False`` skips the distance transform (cheaper for a few rays on a big grid).
+
+    Memory: two bytes per cell of the padded grid: one uint16 code per cell (occupied, outside
+    the grid, or a free cell's squared distance to the nearest occupied cell, clamped at
+    :data:`SKIP_CAP`), and a table of the jump of each code.
     """
 
     #: below this many unfinished rays, :meth:`cast` finishes them one by one in plain Python
@@ -85,17 +117,19 @@ class RayCaster:
         self.origin = tuple(float(v) for v in origin)
         self.shape = occ.shape
         h, w = occ.shape
-        # Padded flat grid: 0 free, 1 occupied, 2 outside (one cell all round, ends the ray).
-        code = np.full((h + 2, w + 2), 2, dtype=np.uint8)
-        code[1:-1, 1:-1] = occ
-        self._code = code.ravel()
-        if not accelerate:
-            self._skip = np.zeros(code.size, dtype=np.float32)
-        elif occ.any():
-            edt = ndimage.distance_transform_edt(code != 1).astype(np.float32)
-            self._skip = np.maximum(edt - np.float32(math.sqrt(2.0) + 1e-3), 0).ravel()
+        # Padded grid, one cell all round outside the map (it ends the ray).
+        padded = np.zeros((h + 2, w + 2), dtype=bool)
+        padded[1:-1, 1:-1] = occ
+        if accelerate:
+            code = clamped_squared_distance(padded, 255, np.uint16)
         else:
-            self._skip = np.full(code.size, np.inf, dtype=np.float32)
+            code = np.zeros((h + 2, w + 2), dtype=np.uint16)
+        code[padded] = OCCUPIED
+        del padded
+        code[0, :] = code[-1, :] = OUTSIDE
+        code[:, 0] = code[:, -1] = OUTSIDE
+        self._code = code.ravel()
+        self._skip = skip_table(no_walls=accelerate and not occ.any())
 
     def cast(self, sensor_poses, beam_angles, max_range: float) -> np.ndarray:
         """Ranges (P, B) of beams ``beam_angles`` (B,) from ``sensor_poses`` (P, 3)."""
@@ -162,17 +196,18 @@ class RayCaster:
             # passed max_range.
             cell = code[rays.flat]
             over = rays.t > rays.t_end
-            hit = (cell == 1) & ~over
-            done = (cell != 0) | over
+            hit = (cell == OCCUPIED) & ~over
+            done = (cell >= OUTSIDE) | over
             if hit.any():
                 ranges[rays.ids[hit]] = rays.t[hit] * res
             if done.any():
                 rays.keep(~done)
                 if not rays.ids.size:
                     break
+                cell = cell[~done]
             # Move the others on: far from occupied cells, a safe jump through free space first,
             # then on to the next cell crossed.
-            jump = skip[rays.flat]
+            jump = skip[cell]
             far = jump >= 2.0
             if not far.any():
                 xs = rays.tmx < rays.tmy
@@ -206,17 +241,18 @@ class RayCaster:
         once few rays are left (the long ones, often grazing a wall cell by cell).
         """
         code, skip, res = memoryview(self._code), memoryview(self._skip), self.resolution
+        occupied, outside = OCCUPIED, OUTSIDE
         h, w = self.shape
         wp = w + 2
         for ray, f, ti, t_end, ax, ay, dx, dy, sx, sy, x0, y0, vx, vy, ix, iy in rays.each():
             while True:
                 cell = code[f]
                 over = ti > t_end
-                if cell == 1 and not over:
+                if cell == occupied and not over:
                     ranges[ray] = ti * res
-                if cell != 0 or over:
+                if cell >= outside or over:
                     break
-                jump = skip[f]
+                jump = skip[cell]
                 if jump >= 2.0:      # as in _locate, without the nudge
                     ti = min(ti + jump, t_end + 1.0)
                     col = min(max(math.floor(x0 + vx * ti), -1), w)

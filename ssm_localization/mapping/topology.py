@@ -40,6 +40,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
+from .distance import BAND_ROWS, distances_from, feature_transform
 from .occupancy import OccupancyMap
 from ..config.mapping import TopologyConfig
 from ..progress import ProgressCallback
@@ -175,6 +176,7 @@ class _Skeleton:
     cluster: np.ndarray    # junction-cluster label per pixel, -1 elsewhere
     n_clusters: int
     adj: np.ndarray        # (M, 2) unique (arc, cluster) contacts
+    width: int             # of the padded grid the flat indices refer to
 
 
 def _components(n: int, er: np.ndarray, ec: np.ndarray,
@@ -201,7 +203,8 @@ def _analyse(mask: np.ndarray, w: int) -> _Skeleton:
     ok = (a >= 0) & (c >= 0)
     adj = np.unique(np.column_stack((a[ok], c[ok])), axis=0) if ok.any() \
         else np.zeros((0, 2), dtype=np.int64)
-    return _Skeleton(idx, graph, er, ec, junction, endpoint, arc, n_arcs, cluster, n_cl, adj)
+    return _Skeleton(idx, graph, er, ec, junction, endpoint, arc, n_arcs, cluster, n_cl, adj,
+                     w)
 
 
 def _to_cells(res: float):
@@ -260,8 +263,10 @@ def _brushfire(occ_map: OccupancyMap,
     h, w = occ_map.shape
     free = np.zeros((h + 2, w + 2), dtype=bool)
     free[1:-1, 1:-1] = occ_map.free_mask(free_thresh)
-    dist, feat = ndimage.distance_transform_edt(free, return_indices=True)
-    return free, dist, feat.astype(np.int32, copy=False)
+    # scipy's transform with its distances costs about 40 bytes per cell; the feature transform
+    # alone and the distances made from it band by band (bit for bit the same) about 17
+    feat = feature_transform(~free)
+    return free, distances_from(feat), feat
 
 
 def _ridge(traversable: np.ndarray, dist: np.ndarray, feat: np.ndarray,
@@ -275,19 +280,24 @@ def _ridge(traversable: np.ndarray, dist: np.ndarray, feat: np.ndarray,
     rows, cols = traversable.shape
     ridge = np.zeros_like(traversable)
     strength = np.zeros(traversable.shape, dtype=np.float32)
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        sp = (slice(0, rows - dr), slice(max(0, -dc), cols - max(0, dc)))
-        sq = (slice(dr, rows), slice(max(0, dc), cols + min(0, dc)))
-        both = traversable[sp] & traversable[sq]
-        sep2 = ((feat[0][sp] - feat[0][sq]).astype(np.int64) ** 2
-                + (feat[1][sp] - feat[1][sq]).astype(np.int64) ** 2)
-        dmax = np.maximum(dist[sp], dist[sq])
-        on = both & (sep2 > np.maximum(9.0, (ridge_ratio * dmax) ** 2))
-        ridge[sp] |= on
-        ridge[sq] |= on
-        ratio = np.where(on, np.sqrt(sep2, dtype=np.float32) / np.maximum(dmax, 1.0), 0.0)
-        np.maximum(strength[sp], ratio, out=strength[sp])
-        np.maximum(strength[sq], ratio, out=strength[sq])
+    # band by band (rows of the first cell of each pair), so the temporaries stay small
+    for b0 in range(0, rows, BAND_ROWS):
+        for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            b1 = min(b0 + BAND_ROWS, rows - dr)
+            if b1 <= b0:
+                continue
+            sp = (slice(b0, b1), slice(max(0, -dc), cols - max(0, dc)))
+            sq = (slice(b0 + dr, b1 + dr), slice(max(0, dc), cols + min(0, dc)))
+            both = traversable[sp] & traversable[sq]
+            sep2 = ((feat[0][sp] - feat[0][sq]).astype(np.int64) ** 2
+                    + (feat[1][sp] - feat[1][sq]).astype(np.int64) ** 2)
+            dmax = np.maximum(dist[sp], dist[sq])
+            on = both & (sep2 > np.maximum(9.0, (ridge_ratio * dmax) ** 2))
+            ridge[sp] |= on
+            ridge[sq] |= on
+            ratio = np.where(on, np.sqrt(sep2, dtype=np.float32) / np.maximum(dmax, 1.0), 0.0)
+            np.maximum(strength[sp], ratio, out=strength[sp])
+            np.maximum(strength[sq], ratio, out=strength[sq])
     return ridge, strength
 
 
@@ -374,12 +384,16 @@ def _topology(occ_map: OccupancyMap, nodes: np.ndarray, kinds: list[int], edges:
     wp = w + 2
     res = occ_map.resolution
     rows, cols = nodes // wp - 1, nodes % wp - 1
+    clearance = np.empty((h, w), dtype=np.float32)
+    for r0 in range(0, h, BAND_ROWS):           # band by band: no float64 copy of the map
+        r1 = min(r0 + BAND_ROWS, h)
+        clearance[r0:r1] = dist[1 + r0:1 + r1, 1:-1] * res
     return Topology(node_xy=occ_map.cell_to_world(rows, cols).reshape(-1, 2),
                     node_kind=np.asarray(kinds, dtype=np.int8),
                     node_cell=np.column_stack((rows, cols)).astype(np.int64).reshape(-1, 2),
                     node_clearance=(dist.ravel()[nodes] * res).astype(np.float64),
                     edges=edges, gvd_mask=mask.reshape(h + 2, wp)[1:-1, 1:-1].copy(),
-                    clearance=(dist[1:-1, 1:-1] * res).astype(np.float32))
+                    clearance=clearance)
 
 
 def _merge(cands: np.ndarray, score: np.ndarray, w: int, radius_cells: float) -> np.ndarray:
@@ -515,24 +529,69 @@ def _arc_nodes(sk: _Skeleton, nodes: list[int], half_spacing: float) -> np.ndarr
     """
     Nodes along the GVD so that no skeleton pixel is farther than ``half_spacing`` from one.
 
-    Farthest-point sampling by geodesic distance on the skeleton, from the nodes chosen so far.
+    Farthest-point sampling by geodesic distance on the skeleton, from the nodes chosen so far:
+    the pixel farthest from every node becomes one (the first of equals), until none is
+    farther than ``half_spacing``. A new node lowers distances only within its geodesic reach,
+    no shorter than the straight line: so its Dijkstra runs on the rows of skeleton pixels
+    within that reach (a contiguous run of the row-major pixels) and the distances are updated
+    there only; the farthest pixel is found from the maximum of each block of
+    :data:`_FPS_BLOCK` pixels. The same nodes as a Dijkstra over the whole skeleton per node,
+    at a cost that grows with the reach instead of the map.
     """
     pos, on = _on_skeleton(sk, nodes)
     src = np.unique(pos[on])
+    n = len(sk.idx)
     if src.size:
         geo = dijkstra(sk.graph, directed=True, indices=src, min_only=True)
     else:
-        geo = np.full(len(sk.idx), np.inf)
+        geo = np.full(n, np.inf)
+    if n == 0:
+        return sk.idx[:0]
+    rows = sk.idx // sk.width
+    blocks = _BlockMax(geo)
     new = []
     while True:
-        k = int(np.argmax(geo))
+        k = blocks.argmax()
         if not geo[k] > half_spacing:
             break
         new.append(k)
         lim = geo[k] if np.isfinite(geo[k]) else np.inf
-        dk = dijkstra(sk.graph, directed=True, indices=k, limit=lim)
-        np.minimum(geo, dk, out=geo)
+        if np.isfinite(lim):
+            a = int(np.searchsorted(rows, rows[k] - math.ceil(lim), side='left'))
+            b = int(np.searchsorted(rows, rows[k] + math.ceil(lim), side='right'))
+        else:
+            a, b = 0, n
+        dk = dijkstra(sk.graph[a:b, a:b], directed=True, indices=k - a, limit=lim)
+        np.minimum(geo[a:b], dk, out=geo[a:b])
+        blocks.update(a, b)
     return sk.idx[new]
+
+
+#: pixels per block of the farthest-point sampling's running maximum
+_FPS_BLOCK = 2048
+
+
+class _BlockMax:
+    """The first index of the largest value of an array, kept per block as parts change."""
+
+    def __init__(self, values: np.ndarray) -> None:
+        self.values = values
+        n = len(values)
+        self.n_blocks = -(-n // _FPS_BLOCK)
+        padded = np.full(self.n_blocks * _FPS_BLOCK, -np.inf)
+        padded[:n] = values
+        self.block_max = padded.reshape(self.n_blocks, _FPS_BLOCK).max(axis=1)
+
+    def update(self, a: int, b: int) -> None:
+        """Refresh the maxima of the blocks holding ``values[a:b]``."""
+        for blk in range(a // _FPS_BLOCK, (b - 1) // _FPS_BLOCK + 1):
+            self.block_max[blk] = self.values[blk * _FPS_BLOCK:(blk + 1) * _FPS_BLOCK].max()
+
+    def argmax(self) -> int:
+        """Return the first index of the largest value (as ``np.argmax`` of the values)."""
+        blk = int(np.argmax(self.block_max))
+        lo = blk * _FPS_BLOCK
+        return lo + int(np.argmax(self.values[lo:lo + _FPS_BLOCK]))
 
 
 def _edges(sk: _Skeleton, nodes: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ from typing import Any
 
 from ssm_localization.config import IndexConfig, LocalizerConfig, TrackerConfig
 from ssm_localization.config import params as ssm_params
+from ssm_localization.mapping.map_limits import MAX_MAP_CELLS
 import yaml
 
 
@@ -117,7 +118,7 @@ AUTOSTART: dict[str, tuple[Any, str]] = {
                         'files set it) or for ros2 lifecycle set'),
 }
 MAP_PARAMS: dict[str, tuple[Any, str]] = {
-    'max_map_cells': (25_000_000, 'ignore larger maps (cells); 0 = no limit'),
+    'max_map_cells': (MAX_MAP_CELLS, 'ignore larger maps (cells); 0 = no limit'),
     'max_gvd_points': (20000, 'GVD cells drawn in topological_map (subsampled)'),
 }
 

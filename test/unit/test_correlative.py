@@ -5,7 +5,8 @@ import math
 
 import numpy as np
 import pytest
-from ssm_localization.localization.correlative import CorrelativeGrid
+from scipy import ndimage
+from ssm_localization.localization.correlative import CorrelativeGrid, likelihood_grid
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
 
@@ -100,15 +101,15 @@ def test_window_and_yaws_restrict_the_search(grid):
 
 def test_levels_bound_the_leaves(grid):
     """Level k holds the maximum of level 0 over the 2^k x 2^k cells anchored at each cell."""
-    p = grid.pad
-    base = grid._levels[0].reshape(-1, grid._wp)
+    t, left = grid._top, grid._left
+    base = grid.level_grid(0)
     rng = np.random.default_rng(3)
     for k in range(1, grid.depth + 1):
-        level = grid._levels[k].reshape(-1, grid._wp)
+        level = grid.level_grid(k)
         s = 1 << k
         for r, c in rng.integers(0, 40, (30, 2)):
-            window = base[p + r:p + r + s, p + c:p + c + s]
-            assert level[p + r, p + c] == window.max()
+            window = base[t + r:t + r + s, left + c:left + c + s]
+            assert level[t + r, left + c] == window.max()
 
 
 def test_budget_and_empty_input(grid):
@@ -126,3 +127,63 @@ def test_config_validation():
         CorrelativeGrid(_rooms(), depth=0)
     with pytest.raises(ValueError, match='sigma'):
         CorrelativeGrid(_rooms(), sigma=0.0)
+
+
+def test_likelihood_grid_is_the_dense_formula():
+    """The clamped, tabled likelihood: the values of the full distance transform."""
+    rng = np.random.default_rng(4)
+    occ = rng.random((300, 260)) < 0.001
+    occ[100:104, :200] = True
+    for res, sigma in ((0.05, 0.1), (0.1, 0.1), (0.02, 0.25)):
+        dist = ndimage.distance_transform_edt(~occ) * res
+        want = np.round(255.0 * np.exp(-0.5 * (dist / sigma) ** 2)).astype(np.uint8)
+        assert np.array_equal(likelihood_grid(occ, res, sigma), want)
+
+
+def test_free_pyramid_at_window_anchors(grid):
+    """A level-k window anchored at a multiple of 2^k holds a free cell as the map says."""
+    free = _rooms().free_mask()
+    for k in range(grid.depth + 1):
+        s = 1 << k
+        for r in range(0, grid.height, s):
+            for c in range(0, grid.width, s):
+                assert grid._any_free(k, r, c) == free[r:r + s, c:c + s].any()
+
+
+def test_points_off_the_map_score_nothing(grid):
+    """Poses and points far off the map: the padding (0), never a wrapped-around map cell."""
+    pts = np.array([[0.5, 0.0], [0.0, 0.5], [-0.5, 0.3]])
+    far = np.array([[-30.0, 2.0, 0.0], [40.0, -1.0, 1.0], [3.0, 30.0, 2.0], [3.0, -30.0, 0.0],
+                    [-9.3, -2.0, 0.0]])
+    assert (grid.score_poses(pts, far) == 0.0).all()
+    found = grid.search(np.array([[9.9, 0.0], [-9.9, 0.0], [0.0, 9.9], [0.0, -9.9]]),
+                        yaws=[0.0, 0.7], min_score=0.0, ratio=0.0, max_leaves=10 ** 6)
+    # brute force: every leaf's score from the map cells its points fall in, 0 off the map
+    for pose, score in zip(found.poses[:200], found.scores[:200]):
+        assert grid.score_poses(np.array([[9.9, 0.0], [-9.9, 0.0], [0.0, 9.9], [0.0, -9.9]]),
+                                pose[None])[0] == pytest.approx(score)
+
+
+def test_region_ratio_keeps_each_regions_best_place():
+    """A wall-dense region scoring every scan well does not hide another region's best place."""
+    d = np.zeros((64, 160), np.int8)
+    d[::4, :64] = 100                                 # left: walls every 0.4 m
+    d[:, ::4][:, :16] = 100
+    room = _rooms().data
+    d[12:52, 96:156] = room                           # right: the rooms
+    occ = OccupancyMap(d, RES, (0.0, 0.0, 0.0))
+    grid = CorrelativeGrid(occ, depth=3, sigma=0.1, max_range=10.0)
+    truth = _cell_centre_pose(occ, 12 + 12, 96 + 20, 0.4)
+    pts = _scan_from(occ, truth)
+    labels = np.where(np.arange(grid.free_windows().shape[1]) < 64 // 8, 0, 1)[None, :] \
+        * np.ones((grid.free_windows().shape[0], 1), int)
+    labels = np.where(grid.free_windows(), labels, -1)
+    allowed = np.ones((1, 2), bool)
+    found = grid.search(pts, yaws=[0.4], min_score=0.1, ratio=0.95,
+                        regions=(labels, allowed), region_ratio=0.3)
+    assert set(found.regions.tolist()) == {0, 1} or found.regions[0] == 1
+    right = found.poses[found.regions == 1][0]
+    assert math.hypot(right[0] - truth[0], right[1] - truth[1]) < 2 * RES
+    # without regions the result is the plain search's, and says no regions
+    plain = grid.search(pts, yaws=[0.4], min_score=0.1, ratio=0.95)
+    assert plain.regions is None

@@ -12,8 +12,11 @@ import pytest
 from ssm_localization import (build_index, IndexConfig, load_index, load_index_config,
                               load_map_yaml, OccupancyMap, save_index, save_map_yaml,
                               TopologyConfig)
+from ssm_localization import GlobalLocalizer
+from ssm_localization.bench.memory import format_layers, LayerMeter
 from ssm_localization.config import config_from_json, config_to_json
-from ssm_localization.mapping.index import FORMAT_VERSION
+from ssm_localization.localization.map_layers import LAYER_NAMES
+from ssm_localization.mapping.index import FORMAT_VERSION, INDEX_LAYERS
 from ssm_localization.mapping.raycast import cast_rays
 from ssm_localization.mapping.topology import NodeKind
 
@@ -213,7 +216,7 @@ def test_cli_index_with_params_and_plot(tmp_path, capsys):
 
 
 def test_office_map_is_deterministic():
-    from ssm_localization.bench.index import office_map
+    from ssm_localization.bench.synthetic import office_map
     a, b = office_map(size=30.0), office_map(size=30.0)
     assert a.shape == (600, 600) and a.checksum() == b.checksum()
     free = a.free_mask().mean()
@@ -238,3 +241,17 @@ def test_refuses_features_of_another_matcher(built, tmp_path):
     cfg = _rewrite(path, tmp_path / 'cfg.npz', config_json=np.asarray('{"no_such": 1}'))
     with pytest.raises(ValueError, match='rebuild'):
         load_index(cfg)
+
+
+def test_layers_are_reported_in_order_with_their_memory():
+    """build_index and GlobalLocalizer name each layer to the hook; the meter measures it."""
+    meter = LayerMeter(trace=True)
+    index = build_index(_rooms(), IndexConfig(beams=90), layer=meter)
+    localizer = GlobalLocalizer(index, layer=meter)
+    assert [c.name for c in meter.costs] == list(INDEX_LAYERS) + list(LAYER_NAMES)
+    kept = {c.name: c.kept for c in meter.costs}
+    assert kept['ray caster'] >= localizer.caster._code.nbytes
+    assert kept['wall surface'] >= localizer.surface.codes.nbytes
+    assert all(c.peak >= c.kept >= 0 and c.seconds >= 0 for c in meter.costs)
+    table = format_layers(meter.as_dicts(), index.map.data.size)
+    assert 'correlative grid' in table and 'all layers kept' in table

@@ -6,6 +6,7 @@ writers leaving nothing behind on failure.
 """
 from __future__ import annotations
 
+import argparse
 import os
 import struct
 from types import SimpleNamespace
@@ -18,10 +19,12 @@ import pytest
 from ssm_localization import (build_index, load_index, load_map_yaml, MapBuildConfig,
                               occupancy_map_from_msg, OccupancyMap, read_bag, save_index,
                               save_map_yaml, ScanRecord, write_bag, write_results_csv)
+from ssm_localization.cli.arguments import add_max_map_cells
 from ssm_localization.evaluation.replay import ResultRow
 from ssm_localization.mapping import grid
 from ssm_localization.mapping.map_image import header_size
 from ssm_localization.mapping.map_limits import check_map_cells, MapTooLargeError, MAX_MAP_CELLS
+from ssm_localization.ros.parameters import indexer_parameters, localizer_parameters
 
 
 def _png_header(path, width, height):
@@ -37,11 +40,11 @@ def _map_yaml(tmp_path, image):
 
 
 def test_check_map_cells():
-    check_map_cells(5000, 5000, MAX_MAP_CELLS)          # exactly 25 M: allowed
+    check_map_cells(6000, 6000, MAX_MAP_CELLS)          # exactly 36 M: allowed
     check_map_cells(10**6, 10**6, 0)                    # 0: no limit
-    with pytest.raises(MapTooLargeError, match='x: map of 5001 x 5000 cells exceeds '
-                                               'max_map_cells = 25000000'):
-        check_map_cells(5001, 5000, MAX_MAP_CELLS, 'x')
+    with pytest.raises(MapTooLargeError, match='x: map of 6001 x 6000 cells exceeds '
+                                               'max_map_cells = 36000000'):
+        check_map_cells(6001, 6000, MAX_MAP_CELLS, 'x')
     with pytest.raises(ValueError, match='>= 0'):
         check_map_cells(1, 1, -5)
 
@@ -152,3 +155,13 @@ def test_failed_writers_leave_nothing_behind(tmp_path):
     with pytest.raises(RuntimeError):
         write_results_csv(rows(), tmp_path / 'results' / 'r.csv')
     assert sorted(os.listdir(tmp_path)) == ['file']
+
+
+def test_nodes_and_command_line_share_the_default_cap():
+    """The nodes' max_map_cells, the command line's --max-map-cells and the library agree."""
+    assert indexer_parameters()['max_map_cells'][0] == MAX_MAP_CELLS
+    assert localizer_parameters()['max_map_cells'][0] == MAX_MAP_CELLS
+    parser = argparse.ArgumentParser()
+    add_max_map_cells(parser)
+    assert parser.parse_args([]).max_map_cells == MAX_MAP_CELLS
+    assert MAX_MAP_CELLS >= 30_000_000         # campus-scale maps (bench index --campus)

@@ -128,7 +128,8 @@ def test_spectral_score_prefers_the_same_place():
 
 
 # ---------------------------------------------------------------- real CARMEN scans
-@pytest.mark.parametrize('name,k', [('intel', 300), ('freiburg-079', 1000)])
+@pytest.mark.parametrize('name,k', [('intel', 300),
+                                    pytest.param('freiburg-079', 1000, marks=pytest.mark.slow)])
 def test_table2_protocol_on_real_scans(name, k):
     ref = read_carmen_log(shared_data('carmen', f'{name}-corrected.log.gz')).points(k)
     rng = np.random.default_rng(11)
@@ -139,6 +140,7 @@ def test_table2_protocol_on_real_scans(name, k):
         assert res.ok and dxy < 0.01 and dth < np.deg2rad(0.2), (dxy, np.rad2deg(dth))
 
 
+@pytest.mark.slow
 def test_real_consecutive_pairs_freiburg():
     log = read_carmen_log(shared_data('carmen', 'freiburg-079-corrected.log.gz'))
     rng = np.random.default_rng(4)

@@ -6,7 +6,9 @@ import time
 
 import numpy as np
 import pytest
-from ssm_localization.mapping.raycast import beam_angles, cast_rays
+from scipy import ndimage
+from ssm_localization.mapping.raycast import (beam_angles, cast_rays, OCCUPIED, OUTSIDE,
+                                              RayCaster, SKIP_CAP, skip_table)
 
 RES = 0.05
 
@@ -135,7 +137,6 @@ def _brute_force(occ, res, origin, poses, angles, max_range):
 
 @pytest.mark.parametrize('seed', range(6))
 def test_random_grids_match_brute_force(seed):
-    from ssm_localization.mapping.raycast import RayCaster
     rng = np.random.default_rng(seed)
     h, w = rng.integers(15, 60, 2)
     occ = rng.random((h, w)) < (0.005, 0.02, 0.08)[seed % 3]
@@ -159,7 +160,6 @@ def test_random_grids_match_brute_force(seed):
 @pytest.mark.parametrize('seed', range(4))
 def test_plain_python_tail_gives_the_same_ranges_as_the_vectorized_loop(seed):
     """Rays finished one by one (``tail_rays``) must read exactly what the numpy loop reads."""
-    from ssm_localization.mapping.raycast import RayCaster
     rng = np.random.default_rng(100 + seed)
     h, w = rng.integers(80, 200, 2)
     occ = rng.random((h, w)) < (0.002, 0.01, 0.03, 0.0005)[seed]
@@ -178,3 +178,37 @@ def test_plain_python_tail_gives_the_same_ranges_as_the_vectorized_loop(seed):
         b = caster.cast(poses, angles, 12.0)
         assert np.array_equal(np.isinf(a), np.isinf(b))
         assert np.array_equal(a[np.isfinite(a)], b[np.isfinite(b)])
+
+
+def test_cell_codes_are_exact_squared_distances_clamped():
+    """The caster's codes: occupied, outside, or scipy's squared distance (cells^2) clamped."""
+    rng = np.random.default_rng(5)
+    occ = rng.random((700, 650)) < 0.0004           # far apart: distances beyond the clamp
+    occ[300:310, 20:400] = True
+    caster = RayCaster(occ, RES, (0.0, 0.0, 0.0))
+    code = caster._code.reshape(702, 652)
+    padded = np.zeros((702, 652), bool)
+    padded[1:-1, 1:-1] = occ
+    k = np.rint(ndimage.distance_transform_edt(~padded) ** 2)
+    inner = code[1:-1, 1:-1]
+    assert (inner[occ] == OCCUPIED).all()
+    assert np.array_equal(inner[~occ], np.minimum(k[1:-1, 1:-1][~occ], SKIP_CAP))
+    assert (code[0] == OUTSIDE).all() and (code[:, -1] == OUTSIDE).all()
+    # the jumps are those of the float32 distance transform they replace
+    edt = np.sqrt(np.arange(SKIP_CAP + 1.0)).astype(np.float32)
+    expect = np.maximum(edt - np.float32(math.sqrt(2.0) + 1e-3), 0)
+    assert np.array_equal(skip_table()[:SKIP_CAP + 1], expect)
+    assert caster._code.dtype == np.uint16 and caster._code.nbytes == 702 * 652 * 2
+
+
+def test_jumps_do_not_change_ranges_on_an_open_map():
+    """Beams across open space longer than the clamp: the same ranges as without jumps."""
+    occ = _room(900, 900)
+    occ[450, 450] = True
+    rng = np.random.default_rng(2)
+    poses = np.column_stack((rng.uniform(2, 43, 50), rng.uniform(2, 43, 50),
+                             rng.uniform(-math.pi, math.pi, 50)))
+    ang = beam_angles(90)
+    fast = cast_rays(occ, RES, (0, 0, 0), poses, ang, 100.0)
+    plain = RayCaster(occ, RES, (0, 0, 0), accelerate=False).cast(poses, ang, 100.0)
+    assert np.abs(fast - plain).max() < 1e-9

@@ -11,6 +11,7 @@ import math
 from helpers import BAGS
 import numpy as np
 import pytest
+from scipy import ndimage
 from ssm_localization import simulate, SimulationConfig
 from ssm_localization.localization.refine import refine_pose, refine_poses, SurfaceModel
 from ssm_localization.localization.verify import BeamCheck, check_beams
@@ -246,3 +247,43 @@ def test_batched_refinement_equals_single(depot_clean):
         assert got.pose == pytest.approx(one.pose, abs=1e-9)
         assert got.explained == pytest.approx(one.explained, rel=1e-9, abs=1e-12)
         assert np.allclose(got.covariance, one.covariance, rtol=1e-6, atol=1e-15)
+
+
+def _dense_lattice(occ: np.ndarray) -> np.ndarray:
+    """Return the dense float32 signed-distance lattice (cells) by two full transforms."""
+    fine = np.repeat(np.repeat(occ, 2, axis=0), 2, axis=1)
+    pad_o, pad_f = np.pad(fine, 1), np.pad(~fine, 1)
+    occ_v = pad_o[:-1, :-1] | pad_o[:-1, 1:] | pad_o[1:, :-1] | pad_o[1:, 1:]
+    free_v = pad_f[:-1, :-1] | pad_f[:-1, 1:] | pad_f[1:, :-1] | pad_f[1:, 1:]
+    outside = ndimage.distance_transform_edt(~occ_v)
+    inside = ndimage.distance_transform_edt(~free_v)
+    return (np.where(occ_v & free_v, 0.0, np.where(occ_v, -inside, outside)) / 2).astype(
+        np.float32)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_tiled_surface_is_the_dense_lattice_within_its_reach(seed):
+    """Exact within the reach, clamped beyond; the explained fraction bit for bit the same."""
+    rng = np.random.default_rng(seed)
+    occ = np.zeros((230, 170), bool)
+    occ[rng.random(occ.shape) < 0.0002] = True      # specks, open space between
+    occ[40:44, 10:150] = True                       # a wall, and a thick block
+    occ[120:170, 60:90] = True
+    model = SurfaceModel.from_occupancy(occ, RES, (0.3, -0.2, 0.4), 0.5, reach=0.8)
+    dense = _dense_lattice(occ)
+    ii, jj = np.meshgrid(np.arange(dense.shape[0] - 1), np.arange(dense.shape[1] - 1),
+                         indexing='ij')
+    got = model.lattice_values(ii.ravel(), jj.ravel())
+    want = dense[:-1, :-1].ravel()
+    clamp = np.float32(math.sqrt(model.cap) / 2)
+    exact = np.abs(want) < clamp
+    assert np.array_equal(got[exact], want[exact])
+    assert np.array_equal(np.abs(got[~exact]), np.full((~exact).sum(), clamp))
+    assert (np.sign(got[~exact]) == np.sign(want[~exact])).all()
+    assert model.codes.size < dense.size            # open tiles are not stored
+    # an explained fraction whose sigma puts the clamp beyond exp underflow: identical
+    sigma = 0.8 / 38.7
+    pts = rng.uniform((-2.0, -2.0), (20.0, 26.0), (40, 500, 2))
+    dense_model = SurfaceModel.from_occupancy(occ, RES, (0.3, -0.2, 0.4), 0.5, reach=40.0)
+    assert np.array_equal(model.explained(pts, sigma=sigma),
+                          dense_model.explained(pts, sigma=sigma))

@@ -4,7 +4,10 @@ from __future__ import annotations
 from helpers import shared_data
 import numpy as np
 import pytest
+from scipy.sparse.csgraph import dijkstra
 from ssm_localization import load_map_yaml, OccupancyMap, TopologyConfig
+from ssm_localization.bench.synthetic import office_map
+from ssm_localization.mapping import topology
 from ssm_localization.mapping.topology import build_topology, NODE_KIND_NAMES, NodeKind
 
 RES = 0.05
@@ -188,3 +191,33 @@ def test_a_resolution_off_in_its_8th_digit_gives_the_same_nodes(name):
         b = np.sort(np.ravel_multi_index(occ.world_to_cell(other.node_xy), occ.shape))
         assert np.array_equal(a, b), factor
         assert np.array_equal(np.sort(base.node_kind), np.sort(other.node_kind))
+
+
+def _sequential_arc_nodes(sk, nodes, half_spacing):
+    """Farthest-point sampling as first written: a Dijkstra over the whole skeleton per node."""
+    pos, on = topology._on_skeleton(sk, nodes)
+    src = np.unique(pos[on])
+    geo = (dijkstra(sk.graph, directed=True, indices=src, min_only=True) if src.size
+           else np.full(len(sk.idx), np.inf))
+    new = []
+    while True:
+        k = int(np.argmax(geo))
+        if not geo[k] > half_spacing:
+            break
+        new.append(k)
+        lim = geo[k] if np.isfinite(geo[k]) else np.inf
+        np.minimum(geo, dijkstra(sk.graph, directed=True, indices=k, limit=lim), out=geo)
+    return sk.idx[new]
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_arc_nodes_are_those_of_the_sequential_sampling(monkeypatch, seed):
+    """The banded sampling picks the very nodes of a whole-skeleton Dijkstra per node."""
+    occ = office_map(size=40.0, seed=seed)
+    fast = build_topology(occ)
+    monkeypatch.setattr(topology, '_arc_nodes', _sequential_arc_nodes)
+    slow = build_topology(occ)
+    assert fast.kind_counts()['arc'] > 20
+    assert np.array_equal(fast.node_xy, slow.node_xy)
+    assert np.array_equal(fast.node_kind, slow.node_kind)
+    assert np.array_equal(fast.edges, slow.edges)

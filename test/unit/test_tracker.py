@@ -56,6 +56,7 @@ def _error(pose, truth) -> tuple[float, float]:
 
 # --------------------------------------------------------------------------- end to end
 
+@pytest.mark.slow
 def test_a_straight_run_recovers_the_path(track_bag):
     bag, odom, truth, kidnaps, loc = track_bag
     n = kidnaps[0]                                   # the first segment: no kidnap in it
@@ -69,6 +70,7 @@ def test_a_straight_run_recovers_the_path(track_bag):
     assert np.median(errors[:, 1]) < math.radians(1.0)
 
 
+@pytest.mark.slow
 def test_a_kidnap_is_detected_and_recovered_without_a_wrong_ok(track_bag):
     bag, odom, truth, kidnaps, loc = track_bag
     tracker = Tracker(loc)
@@ -85,6 +87,7 @@ def test_a_kidnap_is_detected_and_recovered_without_a_wrong_ok(track_bag):
     assert summary.summary.success_rate >= 0.95 and summary.summary.precision >= 0.99
 
 
+@pytest.mark.slow
 def test_kidnaps_into_lookalike_corridors_are_caught():
     """ACES kidnaps whose new place fits the old prediction well (``bags/aces_lookalike``)."""
     bag, odom, truth, kidnaps, loc = _load('aces_lookalike')
@@ -102,6 +105,7 @@ def test_kidnaps_into_lookalike_corridors_are_caught():
                for r in results) >= 2, [r.message for r in results]
 
 
+@pytest.mark.slow
 def test_tracking_without_odometry_stays_precise(track_bag):
     bag, _, truth, kidnaps, loc = track_bag
     n = kidnaps[0]

@@ -1,0 +1,118 @@
+"""localization/regions.py: the correlative search region by region, each at its own yaws."""
+from __future__ import annotations
+
+import math
+
+from helpers import BAGS
+import numpy as np
+import pytest
+from ssm_localization import build_index, GlobalLocalizer, OccupancyMap, read_bag
+from ssm_localization.localization.correlative import CorrelativeResult
+from ssm_localization.localization.localizer import _by_correlation
+from ssm_localization.localization.regions import pick_leaves, with_region_bests
+from ssm_localization.mapping.raycast import beam_angles, cast_rays
+from ssm_localization.transforms import apply, wrap_angle
+
+RES = 0.05
+
+
+def _building(data: np.ndarray, x0: float, y0: float, yaw: float, seed: int) -> None:
+    """Draw a 16 m x 12 m building of rooms, turned by ``yaw`` about (x0, y0), into ``data``."""
+    rng = np.random.default_rng(seed)
+    walls = [(0, 0, 16, 0.2), (0, 11.8, 16, 12), (0, 0, 0.2, 12), (15.8, 0, 16, 12),
+             (0, 5.9, 9, 6.1), (11, 5.9, 16, 6.1)]
+    for x in rng.uniform(2, 14, 3):
+        walls.append((x, 0, x + 0.2, rng.uniform(3, 5)))
+    for _ in range(4):
+        x, y = rng.uniform(1, 14), rng.uniform(7, 11)
+        walls.append((x, y, x + rng.uniform(0.4, 1.2), y + rng.uniform(0.4, 1.2)))
+    free = np.zeros(data.shape, bool)
+    rows, cols = np.indices(data.shape)
+    local = apply((0.0, 0.0, -yaw), np.column_stack(((cols.ravel() + 0.5) * RES - x0,
+                                                     (rows.ravel() + 0.5) * RES - y0)))
+    lx, ly = local[:, 0].reshape(data.shape), local[:, 1].reshape(data.shape)
+    free |= (lx > 0) & (lx < 16) & (ly > 0) & (ly < 12)
+    data[free] = 0
+    for a, b, c, d in walls:
+        data[(lx >= a) & (lx <= c) & (ly >= b) & (ly <= d)] = 100
+
+
+@pytest.fixture(scope='module')
+def campus():
+    """Two buildings 38 m apart, one axis-aligned, one turned by 30 degrees."""
+    data = np.full((500, 1700), -1, np.int8)
+    _building(data, 2.0, 4.0, 0.0, 1)
+    _building(data, 62.0, 2.0, math.radians(30.0), 2)
+    occ = OccupancyMap(data, RES, (0.0, 0.0, 0.0))
+    return occ, GlobalLocalizer(build_index(occ))
+
+
+def test_buildings_apart_are_regions_with_their_own_walls(campus):
+    occ, loc = campus
+    assert loc.regions.count == 2
+    a, b = loc.regions.region_of(np.array([[10.0, 10.0], [68.0, 12.0]]))
+    assert a != b and min(a, b) >= 0
+    assert loc.regions.region_of(np.array([[37.0, 12.0]]))[0] == -1     # the gap
+    # a scan turned by 30 degrees aligns with the turned building's walls
+    angles = np.linspace(0.0, math.pi, 60)
+    aligned = loc.regions.alignment_yaws(angles + math.radians(10.0), 2)
+    for yaws, turn in ((aligned[a], 0.0), (aligned[b], math.radians(30.0))):
+        errors = [abs(wrap_angle(2.0 * (y + math.radians(10.0) - turn))) / 2.0 for y in yaws]
+        assert min(np.abs(np.mod(np.asarray(errors), math.pi / 2.0))) < math.radians(1.5)
+
+
+def test_scan_of_the_turned_building_is_searched_at_its_yaw_and_found(campus):
+    occ, loc = campus
+    truth = (68.0, 9.0, 2.0)                # inside the turned building
+    angles = beam_angles(360)
+    ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([truth]), angles,
+                       30.0)[0]
+    ranges = ranges + np.random.default_rng(0).normal(0.0, 0.01, len(ranges))
+    query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
+    plan = loc.search_plan(query, [])
+    mine = loc.regions.region_of(np.array([truth[:2]]))[0]
+    near = np.abs(wrap_angle(plan.yaws - truth[2])) < math.radians(1.5)
+    assert (near & plan.allowed[:, mine]).any()
+    assert not plan.allowed[:, mine].all()           # each yaw only where it belongs
+    loc_ = loc.localize_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
+    assert loc_.status == 'ok'
+    assert math.hypot(loc_.pose[0] - truth[0], loc_.pose[1] - truth[1]) < 0.05
+
+
+def test_one_building_is_one_region_searched_as_before():
+    bag = read_bag(BAGS / 'depot_sim')
+    loc = GlobalLocalizer(build_index(bag.map))
+    assert loc.regions.count == 1
+    for scan in bag.scans[:6]:
+        query = loc.prepare_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                                 scan.range_min, scan.range_max)
+        hyps = loc.correlate(query, loc.spectral_hypotheses(query))
+        assert loc.to_refine(hyps) == hyps[:loc.config.refine_hypotheses]
+        seeds = _by_correlation(hyps)
+        plan = loc.search_plan(query, [h.initial_pose for h in seeds])
+        assert np.array_equal(plan.yaws, loc.search_yaws(query, [h.initial_pose[2]
+                                                                 for h in seeds]))
+        assert plan.allowed.all()
+
+
+def test_leaves_and_refinement_keep_each_regions_best():
+    poses = np.array([[0, 0, 0], [0.01, 0, 0], [5, 0, 0], [9, 0, 0], [20, 0, 0], [30, 0, 0.0]])
+    same = (lambda a, b: abs(a[0] - b[0]) < 0.5)
+    plain = CorrelativeResult(poses, np.linspace(1, 0.5, 6), True)
+    assert pick_leaves(plain, 2, same) == [0, 2]
+    regional = CorrelativeResult(poses, np.linspace(1, 0.5, 6), True,
+                                 regions=np.array([0, 0, 0, 1, 1, 2]))
+    assert pick_leaves(regional, 2, same) == [0, 2, 3, 4, 5]     # 4: another place
+
+    class Regions:
+        count = 3
+
+        @staticmethod
+        def region_of(xy):
+            return np.asarray(xy)[:, 0].astype(int) // 10
+
+    ranked = [(x, 0.0, 0.0) for x in (1, 2, 3, 12, 25, 14, 27)]
+    assert with_region_bests(Regions, ranked, 2, lambda p: p) == ranked[:2] + [ranked[3],
+                                                                               ranked[4]]
+    Regions.count = 1
+    assert with_region_bests(Regions, ranked, 2, lambda p: p) == ranked[:2]
