@@ -30,6 +30,11 @@ from ssm_localization.transforms import compose, inverse, Pose2, pose_at_time
 BUFFER_SIZE = 500
 
 
+CLOCK_RESET = 1.0
+"""A stamp this many seconds older than the last one means the clock was reset (a bag played
+again, a simulation restarted): what was kept before it is dropped, not what comes after."""
+
+
 class OdometryBuffer:
     """The recent odometry poses (base in the odom frame) by stamp; thread-safe."""
 
@@ -39,7 +44,12 @@ class OdometryBuffer:
         self._poses: deque[tuple[int, Pose2]] = deque(maxlen=size)
 
     def add(self, msg: Any) -> None:
-        """Keep one nav_msgs/Odometry message (out-of-order ones are dropped)."""
+        """
+        Keep one nav_msgs/Odometry message (out-of-order ones are dropped).
+
+        A stamp more than :data:`CLOCK_RESET` s older than the newest one kept is a reset
+        clock: the buffer starts again from it.
+        """
         stamp = stamp_to_ns(msg.header.stamp)
         try:
             pose = pose_from_msg(msg.pose.pose)
@@ -48,6 +58,8 @@ class OdometryBuffer:
         if not all(math.isfinite(v) for v in pose):
             return
         with self._lock:
+            if self._poses and stamp < self._poses[-1][0] - CLOCK_RESET * 1e9:
+                self._poses.clear()
             if self._poses and stamp <= self._poses[-1][0]:
                 if stamp == self._poses[-1][0]:
                     self._poses[-1] = (stamp, pose)

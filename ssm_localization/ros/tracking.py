@@ -17,12 +17,8 @@ from ssm_localization.config import TrackerConfig
 from ssm_localization.localization.localizer import GlobalLocalizer
 from ssm_localization.localization.tracker import Tracker, TrackResult
 from ssm_localization.ros.conversions import covariance3, pose_from_msg, stamp_to_ns
-from ssm_localization.ros.odometry import MapOdomBroadcaster, OdometrySource
+from ssm_localization.ros.odometry import CLOCK_RESET, MapOdomBroadcaster, OdometrySource
 from ssm_localization.transforms import Pose2
-
-
-CLOCK_RESET = 1.0
-"""A scan stamp this many seconds older than the last one tracked means the clock was reset."""
 
 
 class TrackSession:

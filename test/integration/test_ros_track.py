@@ -23,8 +23,8 @@ from ssm_localization import read_bag
 from ssm_localization.ros.conversions import (covariance6, pose_from_msg, pose_msg, stamp_to_sec,
                                               time_msg)
 from ssm_localization.ros.lifecycle import state_label
-from ssm_localization.ros.odometry import (map_to_odom, MapOdomBroadcaster, OdometryBuffer,
-                                           OdometrySource, transform_pose)
+from ssm_localization.ros.odometry import (CLOCK_RESET, map_to_odom, MapOdomBroadcaster,
+                                           OdometryBuffer, OdometrySource, transform_pose)
 from ssm_localization.ros.play import timeline
 from ssm_localization.ros.qos import LATCHED_QOS
 from ssm_localization.transforms import compose, wrap_angle
@@ -215,6 +215,8 @@ def test_odometry_buffer_interpolates_and_refuses_stale_odometry():
     bad.pose.pose.position.x = math.nan
     buf.add(bad)
     assert len(buf) == 2
+    buf.add(_odometry((7.0, 7.0, 0.0), 10.2 - CLOCK_RESET - 3.0))     # the bag played again
+    assert len(buf) == 1 and buf.pose_at(10.2 - CLOCK_RESET - 3.0) == (7.0, 7.0, 0.0)
 
 
 def test_replay_uses_the_nodes_odom_max_age():
@@ -272,7 +274,7 @@ def test_a_scan_delivered_twice_is_tracked_once():
     from ssm_localization import build_index, GlobalLocalizer
     from ssm_localization.config import TrackerConfig
     from ssm_localization.evaluation.replay import match_truth
-    from ssm_localization.ros.tracking import CLOCK_RESET, TrackSession
+    from ssm_localization.ros.tracking import TrackSession
     data = read_bag(find_bag('intel_track'))
     loc = GlobalLocalizer(build_index(data.map))
     odom = match_truth([s.stamp for s in data.scans], data.odom)
