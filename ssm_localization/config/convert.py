@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import typing
 from typing import Any, TypeVar
 
 from ..files.reading import echo
@@ -58,7 +57,6 @@ def flatten(obj: Any, prefix: str = '') -> dict[str, Any]:
 def from_dict(cls: type[T], data: dict | None, where: str = '') -> T:
     """Build dataclass ``cls`` from a (nested) mapping, checking keys and coercing simple types."""
     data = dict(as_mapping(data, f'parameters {where.rstrip(".") or cls.__name__}'))
-    hints = typing.get_type_hints(cls)
     kwargs = {}
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(str(k) for k in set(data) - names)
@@ -76,7 +74,7 @@ def from_dict(cls: type[T], data: dict | None, where: str = '') -> T:
                 raise ValueError(f'parameter {where}{f.name} must be a mapping')
             kwargs[f.name] = from_dict(type(current), value, f'{where}{f.name}.')
             continue
-        kwargs[f.name] = _coerce(value, current, hints.get(f.name), f'{where}{f.name}')
+        kwargs[f.name] = _coerce(value, current, f'{where}{f.name}')
     return dataclasses.replace(defaults, **kwargs)
 
 
@@ -94,7 +92,7 @@ def config_from_json(cls: type[T], text: str) -> T:
     return from_dict(cls, unflatten(json.loads(text)))
 
 
-def _coerce(value: Any, default: Any, hint: Any, name: str) -> Any:
+def _coerce(value: Any, default: Any, name: str) -> Any:
     try:
         if isinstance(default, bool):
             if not isinstance(value, bool):

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import NamedTuple, TypeVar
+from typing import NamedTuple
 
 # the conversions without YAML live in convert.py (index files use them); re-exported here
 from .convert import (as_mapping as _mapping, config_from_json, config_to_json,  # noqa: F401
@@ -29,8 +29,6 @@ from .mapping import IndexConfig, TopologyConfig
 from .tracking import TrackerConfig
 from ..files.reading import echo
 from ..files.yaml_input import load_yaml_file
-
-T = TypeVar('T')
 
 
 def load_yaml_mapping(path: str | Path) -> dict:

@@ -16,7 +16,7 @@ A pose is trusted for what the scan and the map say about it, not for how it was
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -58,10 +58,6 @@ class Evidence:
     #                                    prediction, in standard deviations (Mahalanobis)
     scan_position_std: float = math.nan  # the scan's own pose, before a tracker fuses in the
     #                                      prediction: metres along its least determined direction
-
-    def as_dict(self) -> dict[str, float]:
-        """Return the fields by name (for CSV columns and diagnostics)."""
-        return asdict(self)
 
 
 def endpoint_evidence(surface: SurfaceModel, occ_map: OccupancyMap, laser_pose: Pose2,

@@ -47,7 +47,8 @@ from .evidence import beam_fractions, covariance_stds, endpoint_evidence, Eviden
 from .fusion import lever_arm_covariance
 from .map_layers import build_map_layers
 from .refine import refine_poses
-from .regions import pick_leaves, REGION_RATIO, SearchPlan, with_region_bests
+from .regions import (is_new_yaw, pick_leaves, REGION_RATIO, SearchPlan, spread_yaws,
+                      with_region_bests)
 from .verify import BeamCheck, check_beams
 from .voting import alignment_yaws, Votes
 from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
@@ -117,6 +118,12 @@ class Query:
     beams: np.ndarray
     range_max: float = math.inf     # the sensor's range: a wall nearer should give a return
     _picked: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    @property
+    def wall_angles(self) -> np.ndarray:
+        """Return the directions of the scan's walls: its features' tangents, laser frame."""
+        tangents = self.features.tangents
+        return np.arctan2(tangents[:, 1], tangents[:, 0])
 
     def picked_beams(self, count: int, max_range: float) -> tuple[np.ndarray, np.ndarray]:
         """
@@ -421,9 +428,7 @@ class GlobalLocalizer:
 
         ``seeds``: laser poses of the best hypotheses, best first (``regions.py``).
         """
-        feats = query.features
-        scan_angles = np.arctan2(feats.tangents[:, 1], feats.tangents[:, 0])
-        return self.regions.plan(scan_angles, seeds, self.config)
+        return self.regions.plan(query.wall_angles, seeds, self.config)
 
     def search_yaws(self, query: Query, yaws) -> np.ndarray:
         """
@@ -436,20 +441,14 @@ class GlobalLocalizer:
         cfg = self.config
         centres: list[float] = []
         for yaw in yaws:
-            if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * cfg.search_step for c in centres):
+            if is_new_yaw(yaw, centres, cfg.search_step):
                 centres.append(yaw)
             if len(centres) >= cfg.search_seeds:
                 break
-        feats = query.features
-        scan_angles = np.arctan2(feats.tangents[:, 1], feats.tangents[:, 0])
-        for yaw in alignment_yaws(self._map_spectrum, scan_angles, cfg.search_alignments):
-            if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * cfg.search_step for c in centres):
+        for yaw in alignment_yaws(self._map_spectrum, query.wall_angles, cfg.search_alignments):
+            if is_new_yaw(yaw, centres, cfg.search_step):
                 centres.append(float(yaw))
-        if not centres:
-            return np.zeros(0)
-        base = np.concatenate((centres, np.asarray(centres) + math.pi))
-        n = int(round(cfg.search_spread / cfg.search_step))
-        return np.concatenate([base + cfg.search_step * k for k in range(-n, n + 1)])
+        return spread_yaws(centres, cfg) if centres else np.zeros(0)
 
     def correlate(self, query: Query, hyps: list[Hypothesis]) -> list[Hypothesis]:
         """Return ``hyps`` with the correlative score (mean point likelihood) of their poses."""

@@ -25,6 +25,7 @@ from typing import TypeVar
 import numpy as np
 from scipy import ndimage
 
+from . import voting
 from .correlative import CorrelativeGrid, CorrelativeResult
 from .voting import direction_histogram, PoseVoting
 from ..config.localization import LocalizerConfig
@@ -151,28 +152,24 @@ class SearchRegions:
         steps of ``search_step``. With one region: the yaws of ``GlobalLocalizer.search_yaws``,
         in the same order.
         """
-        step = cfg.search_step
         centres: list[tuple[float, int]] = []          # (yaw, region or -1: all)
         for pose in seeds:
             yaw = float(pose[2])
-            if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * step for c, _ in centres):
+            if is_new_yaw(yaw, [c for c, _ in centres], cfg.search_step):
                 region = int(self.region_of(np.array([pose[:2]]))[0])
                 centres.append((yaw, region))
             if len(centres) >= cfg.search_seeds:
                 break
         aligned = self.alignment_yaws(scan_angles, cfg.search_alignments)
-        n = int(round(cfg.search_spread / step))
-        spread = step * np.arange(-n, n + 1)
         yaws, allowed = [], []
         for r in range(self.count):
             mine = [c for c, g in centres if g in (r, -1)]
             for yaw in aligned[r]:
-                if all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * step for c in mine):
+                if is_new_yaw(yaw, mine, cfg.search_step):
                     mine.append(float(yaw))
             if not mine:
                 continue
-            base = np.concatenate((mine, np.asarray(mine) + math.pi))
-            region_yaws = np.concatenate([base + s for s in spread])
+            region_yaws = spread_yaws(mine, cfg)
             yaws.append(region_yaws)
             mask = np.zeros((len(region_yaws), self.count), bool)
             mask[:, r] = True
@@ -189,19 +186,23 @@ class SearchRegions:
 
         As ``voting.alignment_yaws`` against each region's own direction histogram.
         """
-        if count <= 0 or not self.count:
+        if count <= 0:
             return [np.zeros(0)] * self.count
-        scan = np.conj(np.fft.fft(direction_histogram(scan_angles, BINS)))
-        corr = np.real(np.fft.ifft(self.spectra * scan[None, :], axis=1))
-        out = []
-        for r, c in enumerate(corr):
-            if not np.any(self.spectra[r]):     # no walls seen from this region
-                out.append(np.zeros(0))
-                continue
-            peaks = np.flatnonzero((c >= np.roll(c, 1)) & (c >= np.roll(c, -1)))
-            peaks = peaks[np.argsort(-c[peaks], kind='stable')][:count]
-            out.append(peaks * (math.pi / BINS))
-        return out
+        return [voting.alignment_yaws(spectrum, scan_angles, count) if np.any(spectrum)
+                else np.zeros(0)                # no walls seen from this region
+                for spectrum in self.spectra]
+
+
+def is_new_yaw(yaw: float, centres: Sequence[float], step: float) -> bool:
+    """Tell whether ``yaw`` is over two ``step`` from each of ``centres`` (mod a half turn)."""
+    return all(abs(wrap_angle(2.0 * (yaw - c))) > 2.0 * step for c in centres)
+
+
+def spread_yaws(centres: Sequence[float], cfg: LocalizerConfig) -> np.ndarray:
+    """Return ``centres`` and their flips, each +- ``search_spread`` by ``search_step`` steps."""
+    base = np.concatenate((centres, np.asarray(centres) + math.pi))
+    n = int(round(cfg.search_spread / cfg.search_step))
+    return np.concatenate([base + cfg.search_step * k for k in range(-n, n + 1)])
 
 
 def _to_windows(origin: Pose2, window: float, xy: np.ndarray) -> np.ndarray:

@@ -66,7 +66,8 @@ OCCUPIED = 0xFFFF
 OUTSIDE = 0xFFFE
 #: squared distances are exact up to 255^2 cells^2 (12.75 m at 0.05 m) and clamped there: a
 #: cell further from every wall jumps 255 - sqrt(2) cells at a time instead of further
-SKIP_CAP = 255 * 255
+SKIP_LIMIT = 255
+SKIP_CAP = SKIP_LIMIT * SKIP_LIMIT
 #: the jump subtracted from a cell's distance to the nearest occupied cell centre
 _SKIP_MARGIN = np.float32(math.sqrt(2.0) + 1e-3)
 
@@ -121,7 +122,7 @@ class RayCaster:
         padded = np.zeros((h + 2, w + 2), dtype=bool)
         padded[1:-1, 1:-1] = occ
         if accelerate:
-            code = clamped_squared_distance(padded, 255, np.uint16)
+            code = clamped_squared_distance(padded, SKIP_LIMIT, np.uint16)
         else:
             code = np.zeros((h + 2, w + 2), dtype=np.uint16)
         code[padded] = OCCUPIED

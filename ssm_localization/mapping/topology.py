@@ -241,8 +241,8 @@ def build_topology(occ_map: OccupancyMap, config: TopologyConfig | None = None,
     _thin(mask, ring)
     report(2, steps, 'prune')
     dflat = dist.ravel()
-    _prune(mask, ring, width, dflat, strength.ravel(), cells(cfg.min_spur_length), cfg)
-    sk = _analyse(mask, width)
+    sk = _prune(mask, ring, width, dflat, strength.ravel(), cells(cfg.min_spur_length), cfg)
+    del strength
     report(3, steps, 'nodes')
     nodes, kinds = _select_nodes(sk, dflat, traversable, width, cells, cfg)
     report(4, steps, 'edges')
@@ -316,19 +316,24 @@ def _fill_free_holes(ridge: np.ndarray, free: np.ndarray) -> None:
 
 
 def _prune(mask: np.ndarray, ring: np.ndarray, w: int, dflat: np.ndarray, sflat: np.ndarray,
-           min_spur: float, cfg: TopologyConfig) -> None:
-    """Step 3: remove spurs and noise from the thinned skeleton ``mask`` in place, until stable."""
+           min_spur: float, cfg: TopologyConfig) -> _Skeleton:
+    """
+    Step 3: remove spurs and noise from the thinned skeleton ``mask`` in place, until stable.
+
+    Returns the analysis of the pruned skeleton.
+    """
     for _ in range(MAX_PRUNE_ROUNDS):
         sk = _analyse(mask, w)
         if sk.idx.size == 0:
-            break
+            return sk
         drop = (_spur_pixels(sk, dflat, sflat, min_spur, cfg)
                 | _lone_cluster_pixels(sk, min_spur)
                 | _small_component_pixels(sk, min_spur))
         if not drop.any():
-            break
+            return sk
         mask[sk.idx[drop]] = False
         _thin(mask, ring)
+    return _analyse(mask, w)
 
 
 def _spur_pixels(sk: _Skeleton, dflat: np.ndarray, sflat: np.ndarray, min_spur: float,
@@ -555,7 +560,7 @@ def _arc_nodes(sk: _Skeleton, nodes: list[int], half_spacing: float) -> np.ndarr
         if not geo[k] > half_spacing:
             break
         new.append(k)
-        lim = geo[k] if np.isfinite(geo[k]) else np.inf
+        lim = geo[k]
         if np.isfinite(lim):
             a = int(np.searchsorted(rows, rows[k] - math.ceil(lim), side='left'))
             b = int(np.searchsorted(rows, rows[k] + math.ceil(lim), side='right'))

@@ -2,7 +2,7 @@
 Conversions between ROS 2 messages and the ROS-free core types.
 
 LaserScan -> ``localize_scan`` arguments, :class:`OccupancyMap` -> OccupancyGrid (the other way is
-the core's duck-typed ``mapping.map_io.occupancy_map_from_msg``),
+the core's duck-typed ``mapping.occupancy.occupancy_map_from_msg``),
 ``Localization`` -> PoseWithCovarianceStamped, ``ScanRecord`` -> LaserScan, poses -> PoseStamped.
 Everything here is a plain function of its inputs (no node, no I/O).
 """

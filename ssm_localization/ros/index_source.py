@@ -30,11 +30,11 @@ import threading
 from typing import Any, Callable, NamedTuple
 
 from ssm_localization.config import IndexConfig, LocalizerConfig
-from ssm_localization.config.params import flatten
+from ssm_localization.config.convert import flatten
 from ssm_localization.localization.localizer import GlobalLocalizer
 from ssm_localization.mapping.index import build_index, load_index, MapIndex, save_index
-from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.map_limits import MAX_MAP_CELLS
+from ssm_localization.mapping.occupancy import OccupancyMap
 from ssm_localization.progress import ProgressCallback
 from ssm_localization.ros.index_builder import BuildJob, IndexBuilder
 

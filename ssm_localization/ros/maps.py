@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from nav_msgs.msg import OccupancyGrid
-from ssm_localization.mapping.map_io import occupancy_map_from_msg, OccupancyMap
+from ssm_localization.mapping.occupancy import occupancy_map_from_msg, OccupancyMap
 
 
 def map_from_msg(msg: OccupancyGrid, max_cells: int) -> OccupancyMap:

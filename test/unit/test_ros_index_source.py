@@ -104,6 +104,13 @@ class Harness:
     def settle(self):
         assert self.source.wait_idle(5.0)
 
+    def map_while_loading(self, fake_map) -> None:
+        """Start (the file's load blocked), receive ``fake_map``, let the load go on, settle."""
+        self.source.start()
+        self.source.on_map(fake_map)
+        self.release.set()
+        self.settle()
+
     def close(self):
         self.source.stop()
 
@@ -136,10 +143,7 @@ def test_good_file_then_matching_map_keeps_the_file_and_takes_the_topic_frame(ha
 
 def test_file_built_for_another_map_is_not_used(harness_factory):
     h = harness_factory('A', block_load=True)
-    h.source.start()
-    h.source.on_map(FakeMap('B'))
-    h.release.set()
-    h.settle()
+    h.map_while_loading(FakeMap('B'))
     assert [s.checksum[:1] for s in h.ready] == ['B'] and h.built == ['B']
     warning, = h.log.warnings()
     assert 'was built for another map' in warning and 'not using it' in warning
@@ -173,10 +177,7 @@ def test_corrupt_file_falls_back_to_the_map_topic(harness_factory):
 
 def test_corrupt_file_with_a_map_already_received(harness_factory):
     h = harness_factory('corrupt', block_load=True)
-    h.source.start()
-    h.source.on_map(FakeMap('E'))
-    h.release.set()
-    h.settle()
+    h.map_while_loading(FakeMap('E'))
     assert h.ready[-1].checksum[:1] == 'E' and h.saved == ['E']
 
 
