@@ -53,8 +53,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ssm_localization.bench.data import data_dir, DATA_HELP  # noqa: E402
 from ssm_localization.bench.places import (answers_on, foreign, load_place,  # noqa: E402
                                            real_map, REAL_PLACES)
+from ssm_localization.config.confidence import REFUSED_REASONS  # noqa: E402
 from ssm_localization.config.localization import LocalizerConfig  # noqa: E402
 from ssm_localization.config.tracking import TrackerConfig  # noqa: E402
 from ssm_localization.evaluation.calibration import (fit_confidence,  # noqa: E402
@@ -194,7 +196,7 @@ def localize(args) -> list:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--data', type=Path, default=Path('..') / 'shared' / 'data')
+    ap.add_argument('--data', type=Path, default=None, help=DATA_HELP)
     ap.add_argument('--work', type=Path, default=Path('bench_data'))
     ap.add_argument('--own', type=int, default=150, help='own scans per real building')
     ap.add_argument('--sim', type=int, default=150, help='own scans per simulated map')
@@ -210,6 +212,7 @@ def main(argv=None) -> int:
     ap.add_argument('--tracker', action='store_true',
                     help="fit the tracker's model (TRACK_CONFIDENCE_MODEL) instead")
     args = ap.parse_args(argv)
+    args.data = data_dir(args.data)
     if args.tracker:
         return fit_tracker(args)
     answers = collect(args)
@@ -221,7 +224,7 @@ def main(argv=None) -> int:
     with_pose = [a for a in answers if a.values is not None]
     accepted = [a for a in with_pose if a.ok]
     refused: dict[str, float] = {}
-    for reason in ('implausible', 'rival', 'degenerate'):
+    for reason in REFUSED_REASONS:
         these = [a for a in with_pose if not a.ok and refusal(a) == reason]
         total = sum(weight[id(a)] for a in these)
         refused[reason] = round(sum(weight[id(a)] * a.right for a in these) / total, 4) \

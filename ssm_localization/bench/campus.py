@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .places import REAL_PLACES, sim_queries
+from .places import odd_scans, REAL_PLACES, sim_queries
 from .synthetic import office_map
 from ..io.bag_records import ScanRecord
 from ..io.bag_writer import write_bag
-from ..io.carmen import build_map, CarmenLog, log_scan_records, read_carmen_log
+from ..io.carmen import build_map, CarmenLog, read_carmen_log
 from ..mapping.map_io import load_map_yaml, OccupancyMap, save_map_yaml
 from ..transforms import compose, Pose2
 
@@ -78,10 +78,7 @@ class Campus:
 def _turned_log(log: CarmenLog, yaw: float) -> CarmenLog:
     """Return ``log`` with its poses turned by ``yaw`` about the world origin."""
     turn = (0.0, 0.0, yaw)
-    poses = np.array([compose(turn, tuple(p)) for p in log.poses])
-    return CarmenLog(ranges=log.ranges, poses=poses, stamps=log.stamps,
-                     angle_min=log.angle_min, angle_increment=log.angle_increment,
-                     max_range=log.max_range, name=log.name, odometry=log.odometry)
+    return dataclasses.replace(log, poses=np.array([compose(turn, tuple(p)) for p in log.poses]))
 
 
 def _site_grid(data: Path, name: str, yaw_deg: float) -> tuple[OccupancyMap, bool]:
@@ -186,33 +183,25 @@ class SiteQueries:
     """The query scans of one site, their ground truth in the campus frame (base poses)."""
 
     site: str
-    real: bool
     scans: list[ScanRecord]
     truth: list[Pose2]
 
 
-def site_queries(data: Path, site: Site, real_max: int, n_sim: int,
-                 seed: int) -> SiteQueries:
+def site_queries(data: Path, site: Site, count: int, seed: int) -> SiteQueries:
     """
-    Return the site's queries.
+    Return the site's ``count`` queries.
 
-    Real: ``real_max`` odd-numbered scans evenly spread over the log (0: all); simulated:
-    ``n_sim`` random poses on the site's own map (the paper's protocol, seeded), ray-cast there:
-    no other site lies within the laser's range, so the campus would give the same ranges.
+    Real: odd-numbered scans evenly spread over the log (``places.odd_scans``; 0: all);
+    simulated: random poses on the site's own map (the paper's protocol, seeded), ray-cast
+    there: no other site lies within the laser's range, so the campus would give the same ranges.
     """
     if site.real:
         log = read_carmen_log(data / 'carmen' / f'{REAL_PLACES[site.name]}-corrected.log.gz')
-        odd = list(range(1, len(log), 2))
-        if real_max and len(odd) > real_max:
-            step = len(odd) / real_max
-            odd = [odd[int(i * step)] for i in range(real_max)]
-        scans = log_scan_records(log, odd)
-        truth = [compose(site.transform, tuple(float(v) for v in log.poses[k])) for k in odd]
-        return SiteQueries(site.name, True, scans, truth)
-    grid = office_30m() if site.name == 'office_30m' else _sim_grid(data, site.name)
-    scans, by_stamp = sim_queries(grid, n_sim, seed, {})
-    truth = [compose(site.transform, by_stamp[s.stamp]) for s in scans]
-    return SiteQueries(site.name, False, scans, truth)
+        scans, truth = odd_scans(log, count)
+    else:
+        scans, by_stamp = sim_queries(_sim_grid(data, site.name), count, seed, {})
+        truth = [by_stamp[s.stamp] for s in scans]
+    return SiteQueries(site.name, scans, [compose(site.transform, p) for p in truth])
 
 
 def office_30m() -> OccupancyMap:

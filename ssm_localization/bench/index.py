@@ -37,7 +37,7 @@ from ..localization.localizer import GlobalLocalizer
 from ..mapping.index import build_index
 from ..mapping.map_io import load_map_yaml, OccupancyMap, save_map_yaml
 
-__all__ = ['office_map', 'add_arguments', 'run']
+__all__ = ['add_arguments', 'run']
 
 #: (index build s, whole-process peak MB) targets by map name
 TARGETS = {'depot': (1.0, None), 'turtlebot3_world': (1.0, None), 'office': (10.0, 1024.0),
@@ -83,7 +83,6 @@ def _worker(spec: str) -> None:
     """Index one map and build its localizer in this process; print one JSON line."""
     occ_map = _load(spec)
     loaded = _rss_kb('VmHWM')           # the peak so far: imports and map loading
-    base = _rss_kb('VmRSS')
     _reset_peak()
     t0 = time.perf_counter()
     index = build_index(occ_map)
@@ -95,7 +94,6 @@ def _worker(spec: str) -> None:
     whole = max(loaded, _rss_kb('VmHWM'))
     print(json.dumps({'time': t_index, 'localizer_time': t_localizer,
                       'peak_mb': whole / 1024.0, 'build_peak_mb': build_peak / 1024.0,
-                      'delta_mb': (build_peak - base) / 1024.0,
                       'nodes': len(index), 'kinds': index.kind_counts(),
                       'cells': f'{occ_map.width}x{occ_map.height}',
                       'n_cells': occ_map.width * occ_map.height, 'res': occ_map.resolution}))
@@ -104,7 +102,7 @@ def _worker(spec: str) -> None:
 def _layers_worker(spec: str) -> None:
     """Build the index and the localizer layer by layer under tracemalloc; print JSON."""
     occ_map = _load(spec)
-    meter = LayerMeter(trace=True)
+    meter = LayerMeter()
     index = build_index(occ_map, layer=meter)
     GlobalLocalizer(index, layer=meter)
     print(json.dumps({'map_mb': occ_map.data.nbytes / 1e6, 'layers': meter.as_dicts()}))

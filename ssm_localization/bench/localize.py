@@ -47,13 +47,12 @@ import numpy as np
 from .campus import campus_map, office_30m, site_queries, SiteQueries, write_query_bag
 from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer
-from .places import (answers_on, foreign, load_place, place_grid, real_grid, real_map,
-                     REAL_PLACES, SIM_PLACES, sim_queries)
+from .places import (answers_on, foreign, load_place, real_grid, REAL_PLACES, SIM_PLACES,
+                     sim_queries)
 from ..config.params import load_configs
 from ..evaluation.calibration import format_reliability, reliability
 from ..evaluation.plotting import plot_reliability, plot_replay
 from ..evaluation.replay import ResultRow, summarize, within_success
-from ..io.carmen import log_scan_records
 from ..io.sensors import EVERYDAY_SENSORS
 from ..localization.localizer import AMBIGUOUS, GlobalLocalizer, Hypothesis, Localization, OK
 from ..mapping.index import build_index
@@ -68,8 +67,7 @@ SIM_SETS = {
     'depot_clutter': ('depot', CLUTTER),
     'depot_fov180': ('depot', {'fov_deg': 180.0}),
 }
-REAL_SETS = {'intel': 'intel', 'aces': 'aces', 'fr079': 'freiburg-079', 'csail': 'csail',
-             'fhw': 'fhw', 'edmonton': 'edmonton'}
+REAL_SETS = REAL_PLACES
 #: simulated clutter on the maps built from the real logs
 REAL_SIM_SETS = {f'{k}_clutter': (k, CLUTTER) for k in ('intel', 'aces', 'fr079')}
 DEFAULT_SETS = list(SIM_SETS) + list(REAL_SETS)
@@ -123,17 +121,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--reliability', metavar='PNG',
                         help='write the reliability diagram (reported confidence vs observed '
                              'precision, per split) of every answer of the run')
-
-
-def _real_queries(data: Path, work: Path, name: str, limit: int):
-    log, grid = real_map(data, work, name)
-    odd = list(range(1, len(log), 2))
-    if limit and len(odd) > limit:
-        step = len(odd) / limit
-        odd = [odd[int(i * step)] for i in range(limit)]
-    scans = log_scan_records(log, odd)
-    truth = {s.stamp: tuple(float(v) for v in log.poses[k]) for s, k in zip(scans, odd)}
-    return grid, scans, truth
 
 
 def _hypothesis_right(localizer: GlobalLocalizer, h: Hypothesis, truth: Pose2) -> bool:
@@ -272,11 +259,12 @@ def run(args: argparse.Namespace) -> int:
             scans, truth = sim_queries(grid, args.n, args.seed, {})
             if args.campus_bags:
                 bag = write_query_bag(Path(args.campus_bags) / name, grid, [SiteQueries(
-                    name, False, scans, [truth[s.stamp] for s in scans])])
+                    name, scans, [truth[s.stamp] for s in scans])])
                 print(f'  wrote {bag}', flush=True)
         elif name in REAL_SETS:
-            map_name = name
-            grid, scans, truth = _real_queries(data, work, REAL_SETS[name], args.real_max)
+            map_name, place = name, load_place(name, data, work, args.real_max)
+            grid, scans = place.grid, place.scans
+            truth = dict(zip((s.stamp for s in scans), place.truth))
         elif name in REAL_SIM_SETS:
             map_name, extra = REAL_SIM_SETS[name]
             grid = real_grid(data, work, REAL_SETS[map_name])
@@ -361,7 +349,7 @@ def run_campus(args: argparse.Namespace, data: Path, work: Path, index_cfg, loc_
           f'{time.perf_counter() - t0:.0f} s)', flush=True)
     runs, queries = [], []
     for site in campus.sites:
-        q = site_queries(data, site, args.campus_n, args.campus_n, args.seed)
+        q = site_queries(data, site, args.campus_n, args.seed)
         queries.append(q)
         truth = dict(zip((s.stamp for s in q.scans), q.truth))
         one = run_set(localizer, q.scans, truth)
@@ -396,7 +384,7 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
     counts: dict[str, list[int]] = {}
     graded: dict[str, list[tuple[float, bool]]] = {}
     for a in names:
-        grid = place_grid(a, data, work)
+        grid = places[a].grid
         localizer = once(a, 'ssm', lambda: GlobalLocalizer(build_index(grid, index_cfg),
                                                            loc_cfg))
         cells = []

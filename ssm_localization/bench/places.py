@@ -42,6 +42,19 @@ def sim_queries(grid, n: int, seed: int, extra: dict):
     return sim.scans, truth
 
 
+def odd_scans(log: CarmenLog, count: int) -> tuple[list[ScanRecord], list[Pose2]]:
+    """
+    Return the queries of a log: ``count`` odd-numbered scans spread evenly over it (0: all).
+
+    With their corrected poses, the ground truth (the map is built from the even-numbered ones).
+    """
+    odd = list(range(1, len(log), 2))
+    if count and len(odd) > count:
+        step = len(odd) / count
+        odd = [odd[int(i * step)] for i in range(count)]
+    return log_scan_records(log, odd), [tuple(float(v) for v in log.poses[k]) for k in odd]
+
+
 def real_map(data: Path, work: Path, name: str):
     """
     Return the CARMEN log ``name`` and the map of its even-numbered scans.
@@ -107,25 +120,13 @@ def load_place(name: str, data: Path, work: Path, count: int, seed: int = 1) -> 
     """
     if name in REAL_PLACES:
         log, grid = real_map(data, work, REAL_PLACES[name])
-        odd = list(range(1, len(log), 2))
-        if count and len(odd) > count:
-            step = len(odd) / count
-            odd = [odd[int(i * step)] for i in range(count)]
-        return Place(name, grid, log_scan_records(log, odd),
-                     [tuple(float(v) for v in log.poses[k]) for k in odd])
+        return Place(name, grid, *odd_scans(log, count))
     if name in SIM_PLACES:
         grid = load_map_yaml(data / 'maps' / f'{name}.yaml')
         scans, truth = sim_queries(grid, count, seed, {})
         return Place(name, grid, scans, [truth[s.stamp] for s in scans])
     raise ValueError(f'unknown place {name!r} (real: {sorted(REAL_PLACES)}, simulated: '
                      f'{list(SIM_PLACES)})')
-
-
-def place_grid(name: str, data: Path, work: Path) -> OccupancyMap:
-    """Return the map of place ``name`` alone (cached for the real ones)."""
-    if name in REAL_PLACES:
-        return real_grid(data, work, REAL_PLACES[name])
-    return load_map_yaml(data / 'maps' / f'{name}.yaml')
 
 
 def answers_on(localizer: GlobalLocalizer, map_name: str, place: Place,

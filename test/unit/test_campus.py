@@ -58,7 +58,7 @@ def test_campus_queries_land_on_their_buildings_walls(tmp_path):
     assert again.sites == campus.sites
     occ = campus.grid.occupied_mask()
     for site in campus.sites:
-        q = site_queries(data, site, 5, 5, 1)
+        q = site_queries(data, site, 5, 1)
         fits = []
         for scan, truth in zip(q.scans, q.truth):
             r = np.asarray(scan.ranges)

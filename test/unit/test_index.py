@@ -245,7 +245,7 @@ def test_refuses_features_of_another_matcher(built, tmp_path):
 
 def test_layers_are_reported_in_order_with_their_memory():
     """build_index and GlobalLocalizer name each layer to the hook; the meter measures it."""
-    meter = LayerMeter(trace=True)
+    meter = LayerMeter()
     index = build_index(_rooms(), IndexConfig(beams=90), layer=meter)
     localizer = GlobalLocalizer(index, layer=meter)
     assert [c.name for c in meter.costs] == list(INDEX_LAYERS) + list(LAYER_NAMES)
