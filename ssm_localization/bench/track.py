@@ -70,7 +70,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--no-odom', action='store_true',
                         help='also track the real sequence without odometry')
     parser.add_argument('--max-range', type=float, default=0.0, metavar='R',
-                        help='also track the real sequence with the laser limited to R metres')
+                        help='also track the real sequence and its two-kidnap sequence with the '
+                        'laser limited to R metres')
     parser.add_argument('--random-kidnaps', type=int, default=0, metavar='N',
                         help='also N random kidnaps per log (wrong ok after them, recovery)')
     parser.add_argument('--seed', type=int, default=1, help='seed of the random kidnaps')
@@ -155,6 +156,8 @@ def run(args: argparse.Namespace) -> int:
             runs.append(('no-odom', real, False))
         if args.max_range > 0:
             runs.append((f'{args.max_range:g}m', real.limited(args.max_range), True))
+            runs.append((f'kid{args.max_range:g}m', kidnap_sequence(real).limited(args.max_range),
+                         True))
         for label, seq, odometry in runs:
             rows, ts = _track(localizer, track_cfg, seq, odometry)
             print(ts.format(f'{name:6s} {label:7s} [{split_of(name, TUNING_SETS)}]'),

@@ -14,6 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 
+#: what "right" means wherever a confidence is fitted or measured: within this of the truth
+RIGHT_XY = 0.5                      # metres
+RIGHT_YAW = math.radians(5.0)       # radians
 #: reasons the rules refuse an answer before the model is asked, with a neutral rate
 REFUSED_REASONS = {'implausible': 0.0, 'rival': 0.5, 'degenerate': 0.5}
 

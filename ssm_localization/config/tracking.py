@@ -87,12 +87,17 @@ class TrackerConfig:
     lost_confidence: float = param(
         0.5, 'a tracked pose less likely right than this has lost the track: the same scan '
         'goes through global localization')
+    coast_disagreement: float = param(
+        0.1, 'a scan with too few returns to track (an open space, a short-range laser) is '
+        'ray-cast at the prediction: when at most this fraction of its beams disagrees with the '
+        'map (no return where a wall is in range, a return through a wall) the track coasts on '
+        'the odometry; otherwise the scan counts as a miss')
 
     def __post_init__(self) -> None:
         names = [f.name for f in fields(self)]
         check_numbers(self, [n for n in names if n in _POSITIVE],
                       [n for n in names if n not in _POSITIVE])
-        for name in ('min_confidence', 'lost_confidence'):
+        for name in ('min_confidence', 'lost_confidence', 'coast_disagreement'):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f'TrackerConfig.{name} must be in [0, 1], got '
                                  f'{getattr(self, name)!r}')

@@ -11,13 +11,15 @@ from typing import Iterable, Sequence
 import numpy as np
 from tqdm import tqdm
 
+from ..config.confidence import RIGHT_XY, RIGHT_YAW
 from ..files.writing import atomic_files
 from ..localization.localizer import GlobalLocalizer, Localization, OK
 from ..transforms import Pose2, wrap_angle
 
-#: success: status ok and within these bounds of the ground truth
-SUCCESS_XY = 0.5
-SUCCESS_YAW = math.radians(5.0)
+#: success: status ok and within these bounds of the ground truth (what the confidence means
+#: by "right")
+SUCCESS_XY = RIGHT_XY
+SUCCESS_YAW = RIGHT_YAW
 
 
 def within_success(pose: Pose2 | None, truth: Pose2) -> bool:

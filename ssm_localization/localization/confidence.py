@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .evidence import Evidence
-from ..config.confidence import ConfidenceModel
+from ..config.confidence import ConfidenceModel, RIGHT_XY, RIGHT_YAW
 
 #: the margin to the best distinct rival is clipped to this (a larger lead adds nothing)
 MAX_MARGIN = 1.0
@@ -54,3 +56,20 @@ def confidence(ev: Evidence | None, model: ConfidenceModel) -> float:
     if not all(math.isfinite(values[f]) for f in model.features):
         return 0.0
     return model.probability(values)
+
+
+def within_right(cov) -> float:
+    """
+    Return the probability that a pose with Gaussian error ``cov`` (x, y, yaw) is still right.
+
+    Right as the confidence means it: within ``RIGHT_XY`` and ``RIGHT_YAW`` of the truth. The
+    position error is taken as isotropic with the variance of its least determined direction
+    (which puts less mass within the circle than the real one: a lower bound), the yaw error as
+    independent of it. The tracker's confidence in a pose carried over a scan with nothing to
+    verify is that of the last verified pose times this.
+    """
+    cov = np.asarray(cov, float)
+    var_xy = max(float(np.linalg.eigvalsh(cov[:2, :2]).max()), 1e-12)
+    std_yaw = math.sqrt(max(float(cov[2, 2]), 1e-12))
+    return ((1.0 - math.exp(-RIGHT_XY ** 2 / (2.0 * var_xy)))
+            * math.erf(RIGHT_YAW / (math.sqrt(2.0) * std_yaw)))

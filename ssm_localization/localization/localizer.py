@@ -69,6 +69,10 @@ STATUSES = (OK, AMBIGUOUS, FAILED)
 Status = Literal['ok', 'ambiguous', 'failed']
 
 
+class SparseScan(ValueError):
+    """A well-formed scan with too few returns to match: an open space, a short-range laser."""
+
+
 @dataclass(frozen=True, eq=False)
 class Hypothesis:
     """
@@ -173,6 +177,27 @@ def vicinity_score(node_points: np.ndarray, query_points: np.ndarray, pose: Pose
     d, _ = tree.query(apply(pose, query_points), distance_upper_bound=3.0 * sigma_d)
     d = d[np.isfinite(d)]
     return float(np.sum(4.5 - d ** 2 / (2.0 * sigma_d ** 2)))
+
+
+def scan_beams(ranges, angle_min: float, angle_increment: float, range_min: float = 0.0,
+               range_max: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return the beams of a LaserScan for the ray check: ``(angles, ranges)``, laser frame.
+
+    The readings within ``[range_min, range_max]`` and the ``+inf`` ones (no return, REP 117);
+    NaN, ``-inf`` and finite readings outside the range are no measurement at all.
+    """
+    ranges = np.asarray(ranges, dtype=float).ravel()
+    angles = angle_min + angle_increment * np.arange(len(ranges))
+    with np.errstate(invalid='ignore'):
+        keep = (((ranges >= range_min) & (ranges <= min(range_max, MAX_RANGE)))
+                | (ranges == np.inf))
+    return angles[keep], ranges[keep]
+
+
+def sensor_range(range_max: float) -> float:
+    """Return a scan's ``range_max`` as the sensor's range (not positive or NaN: unlimited)."""
+    return float(range_max) if range_max == range_max and range_max > 0 else math.inf
 
 
 def distinct(a: Pose2, b: Pose2, xy: float, yaw: float) -> bool:
@@ -305,20 +330,16 @@ class GlobalLocalizer:
         """
         ranges = np.asarray(ranges, dtype=float).ravel()
         points, _ = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
-        angles = angle_min + angle_increment * np.arange(len(ranges))
-        with np.errstate(invalid='ignore'):
-            keep = (((ranges >= range_min) & (ranges <= min(range_max, MAX_RANGE)))
-                    | (ranges == np.inf))
-        return self.prepare_points(points, angles[keep], ranges[keep], range_max)
+        angles, beams = scan_beams(ranges, angle_min, angle_increment, range_min, range_max)
+        return self.prepare_points(points, angles, beams, range_max)
 
     def prepare_points(self, points: np.ndarray, angles: np.ndarray, beams: np.ndarray,
                        range_max: float = math.inf) -> Query:
         """Return a :class:`Query` of laser-frame ``points`` (sweep order) and its beams."""
         if len(points) < self.config.min_points:
-            raise ValueError(f'too few valid points ({len(points)} < {self.config.min_points})')
-        limit = float(range_max) if range_max == range_max and range_max > 0 else math.inf
+            raise SparseScan(f'too few valid points ({len(points)} < {self.config.min_points})')
         return Query(features=prepare_scan(points, self.matcher_config), points=points,
-                     angles=angles, beams=beams, range_max=limit)
+                     angles=angles, beams=beams, range_max=sensor_range(range_max))
 
     def localize_query(self, query: Query, clock: StageClock | None = None) -> Localization:
         """Return the whole pipeline on a prepared query."""
@@ -526,6 +547,24 @@ class GlobalLocalizer:
             batch = [k for k, h in enumerate(out)
                      if h.check is None and h.explained >= best - margin]
         return out
+
+    def check_at(self, pose: Pose2, angles: np.ndarray, beams: np.ndarray,
+                 range_max: float = math.inf) -> BeamCheck:
+        """
+        Return the ray check of bare beams (laser frame, ``inf`` = no return) at a base pose.
+
+        What :meth:`verify` does for a hypothesis, for a scan too sparse to be a :class:`Query`
+        (:func:`scan_beams` makes its beams): do its few returns and its no-returns agree with
+        the map there?
+        """
+        cfg = self.config
+        pick = np.unique(np.linspace(0, len(angles) - 1, cfg.verify_beams).astype(int)) \
+            if len(angles) else np.zeros(0, int)
+        measured = np.where(beams[pick] > cfg.max_cast_range, np.inf, beams[pick])
+        expected = self.caster.cast(np.array([self.laser_pose(pose)]), angles[pick],
+                                    cfg.max_cast_range)[0]
+        return check_beams(measured, expected, tol=cfg.beam_tolerance,
+                           range_limit=sensor_range(range_max))
 
     def verify(self, query: Query, hyps: list[Hypothesis]) -> list[Hypothesis]:
         """Return ``hyps`` verified: the query's beams ray-cast from each (all at once)."""

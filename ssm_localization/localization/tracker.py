@@ -35,6 +35,10 @@ Per scan (``Tracker.track``):
    relocalization, anything else is reported as such (never ``ok``) and counts as a miss; after
    ``max_misses`` misses in a row the tracker is lost and localizes every scan globally until
    an ``ok``.
+8. coast: a scan with too few returns to track (an open hall seen by a short-range laser) is
+   ray-cast at the prediction; if the map agrees that little is in range there, the prediction
+   is the answer, its confidence the last verified pose's times the probability that the
+   odometry kept it right (``ok`` while that reaches ``min_confidence``); if not, a miss.
 Before the first fix every scan is localized globally; ``set_prior`` (``initialpose``) starts a
 track from a given pose, which the next scan verifies like any other prediction.
 """
@@ -47,11 +51,11 @@ from typing import Literal
 
 import numpy as np
 
-from .confidence import confidence
+from .confidence import confidence, within_right
 from .evidence import covariance_stds, Evidence
 from .fusion import fuse_weak, lever_arm_covariance, mahalanobis2
 from .localizer import (AMBIGUOUS, distinct, FAILED, GlobalLocalizer, Hypothesis, Localization,
-                        OK, position_std, Query, Status, STATUSES)
+                        OK, position_std, Query, scan_beams, SparseScan, Status, STATUSES)
 from .motion import check_pose, Increment, predict
 from ..config.confidence import ConfidenceModel, TRACK_CONFIDENCE_MODEL
 from ..config.tracking import TrackerConfig
@@ -137,6 +141,7 @@ class Tracker:
         self._odom: Pose2 | None = None
         self._misses = 0
         self._recent: list[float] = []          # scores of the last ok answers
+        self._confidence = 0.0                  # of the last pose a scan verified
         self.relocalizations = 0
 
     # -- state ----------------------------------------------------------------------------------
@@ -159,6 +164,7 @@ class Tracker:
         """Forget the track (the next scan is localized globally) and the odometry reference."""
         self._pose, self._odom, self._misses = None, None, 0
         self._cov = np.eye(3)
+        self._confidence = 0.0
         self._recent.clear()
 
     def set_prior(self, pose: Pose2, covariance: np.ndarray | None = None) -> None:
@@ -170,7 +176,7 @@ class Tracker:
         See :meth:`check_prior` for what is refused.
         """
         self._pose, self._cov = self.check_prior(pose, covariance)
-        self._misses = 0
+        self._misses, self._confidence = 0, 0.0
 
     @staticmethod
     def check_prior(pose: Pose2, covariance: np.ndarray | None = None) -> tuple[Pose2, np.ndarray]:
@@ -224,6 +230,10 @@ class Tracker:
             query = scan if isinstance(scan, Query) else self.localizer.prepare_scan(
                 scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
                 scan.range_max)
+        except SparseScan as exc:
+            if pred is None:
+                return self._result(t0, stamp, FAILED, None, f'{note}bad scan: {exc}', mode=LOST)
+            return self._coast(t0, stamp, scan, pred, pred_cov, f'{note}{exc}')
         except (AttributeError, TypeError, ValueError) as exc:
             self._miss()
             return self._result(t0, stamp, FAILED, pred, f'{note}bad scan: {exc}',
@@ -390,11 +400,51 @@ class Tracker:
                             localization=glob, confidence=min(attempt.confidence, 0.5),
                             evidence=attempt.evidence)
 
+    def _coast(self, t0: float, stamp: float, scan, pred: Pose2, pred_cov: np.ndarray,
+               why: str) -> TrackResult:
+        """
+        Carry the track over a scan with too few returns to track, if the map agrees.
+
+        The scan's beams are ray-cast at the prediction. Where the map has no wall within the
+        sensor's range either (an open hall seen by a short-range laser), at most
+        ``coast_disagreement`` of them disagreeing, the prediction is the answer: its confidence
+        is the last verified pose's times the probability that the odometry kept it right
+        (:func:`within_right` of the grown covariance), ``ok`` from the tracker's
+        ``min_confidence`` on. Such a scan is no evidence against the track, so it is no miss:
+        the next scan that sees enough is tracked in a window grown with the covariance (and
+        cross-checked against the whole map when the window cannot hold it). Otherwise the
+        scan is evidence against the track: a miss.
+        """
+        cfg = self.config
+        angles, beams = scan_beams(scan.ranges, scan.angle_min, scan.angle_increment,
+                                   scan.range_min, scan.range_max)
+        check = self.localizer.check_at(pred, angles, beams, scan.range_max)
+        disagree = (check.missing + check.through) / max(check.beams, 1)
+        common = {'covariance': pred_cov, 'predicted': pred, 'mode': TRACKED}
+        if check.beams == 0 or disagree > cfg.coast_disagreement:
+            self._miss()
+            what = (f'bad scan: {why}, no beam measured anything' if check.beams == 0 else
+                    f'{why}: {disagree:.0%} of its beams disagree with the map at the prediction')
+            return self._result(t0, stamp, FAILED, pred, what, **common)
+        conf = self._confidence * within_right(pred_cov)
+        status = OK if conf >= cfg.min_confidence else AMBIGUOUS
+        return self._result(t0, stamp, status, pred, f'{why}: coasting on odometry, the map '
+                            f'agrees with {1.0 - disagree:.0%} of its beams, confidence '
+                            f'{conf:.3f}', confidence=conf, **common)
+
     def _keep(self, t0: float, stamp: float, attempt: _Attempt, pred: Pose2, message: str,
               glob: Localization | None = None) -> TrackResult:
-        """Make the tracked pose the belief."""
-        self._pose, self._cov, self._misses = attempt.pose, attempt.covariance, 0
+        """
+        Make an ``ok`` tracked pose the belief; any other leaves the prediction as the belief.
+
+        A pose that is not ``ok`` may be the wrong one of look-alikes along a corridor (the
+        prediction picked it among poses the scan cannot tell apart): the track does not follow
+        it, so that the next scans are judged against the odometry, not against a guess.
+        """
+        self._misses = 0
         if attempt.status == OK:
+            self._pose, self._cov = attempt.pose, attempt.covariance
+            self._confidence = attempt.confidence
             self._remember(attempt.score)
         return self._result(t0, stamp, attempt.status, attempt.pose, message,
                             covariance=attempt.covariance, score=attempt.score, predicted=pred,
@@ -405,6 +455,7 @@ class Tracker:
                pred: Pose2 | None) -> TrackResult:
         """Make an ``ok`` global answer the belief: a relocalization."""
         self._pose, self._cov, self._misses = glob.pose, glob.covariance, 0
+        self._confidence = glob.confidence
         self._recent.clear()
         self._remember(glob.score)
         self.relocalizations += 1

@@ -412,15 +412,17 @@ class GlobalLocalizerNode(LifecycleNode):
             raise Refused(f'no map/index yet: {detail}')
         return served
 
-    def _prepare(self, msg: LaserScan) -> Prepared:
+    def _prepare(self, msg: LaserScan, min_points: int = 3) -> Prepared:
         """
         Check that ``msg`` can be localized now and prepare it; raise :class:`Refused` if not.
 
-        The scan's arguments are mirrored for an upside-down laser.
+        The scan's arguments are mirrored for an upside-down laser. ``min_points`` 0 lets a
+        well-formed scan with (almost) no returns through: the tracker coasts on it where the
+        map agrees that nothing is in range.
         """
         served = self._check_ready()
         args = scan_args_from_msg(msg)
-        problem = scan_problem(args)
+        problem = scan_problem(args, min_points)
         if problem:
             self.get_logger().warning(f'skipping scan: {problem}', throttle_duration_sec=2.0)
             raise Refused(f'bad scan: {problem}')
@@ -464,7 +466,7 @@ class GlobalLocalizerNode(LifecycleNode):
         session = self.session
         if session is None:
             return
-        scan = self._prepare(msg)
+        scan = self._prepare(msg, min_points=0)
         publish_tf = bool(self.get_parameter('publish_tf').value)
         result = self._run('tracking', lambda: session.track(
             scan.localizer, scan.args, msg.header.stamp, self._frame(scan.served), publish_tf))

@@ -135,6 +135,24 @@ def test_track_mode_follows_the_bag_and_recovers_from_kidnaps(ros, bag):
         assert all(k in right for k in published if start <= k < fix), (start, fix)
 
 
+def test_a_blind_scan_reaches_the_tracker_and_coasts(ros, bag):
+    """Track mode lets a scan with no return through: the map agrees, the track coasts on."""
+    grid, scans, odom, truth, _ = bag
+    node = TrackingNode(ros, publish_markers=True)
+    assert node.ready(grid)
+    node.step(scans[0].msg, odom[scans[0].stamp])
+    assert node.node._last is not None and node.node._last.status == 'ok'
+    blind = copy.deepcopy(scans[1].msg)
+    blind.ranges = [math.inf] * len(blind.ranges)     # nothing within 0.3 m: nothing seen
+    blind.range_max = 0.3
+    node.step(blind, odom[scans[1].stamp])
+    last = node.node._last
+    assert 'coasting on odometry' in last.message, last.message
+    assert _right(last.pose, truth[1])
+    node.step(scans[2].msg, odom[scans[2].stamp])
+    assert node.node._last.status == 'ok' and _right(node.node._last.pose, truth[2])
+
+
 def test_track_mode_takes_initialpose_and_the_service_answer_as_prior(ros, bag):
     grid, scans, odom, truth, _ = bag
     node = TrackingNode(ros)

@@ -18,7 +18,7 @@ from ssm_localization.config.confidence import (CONFIDENCE_MODEL, ConfidenceMode
                                                 TRACK_CONFIDENCE_MODEL)
 from ssm_localization.evaluation.calibration import fit_confidence, isotonic_knots, reliability
 from ssm_localization.files.yaml_input import load_yaml_file
-from ssm_localization.localization.confidence import feature_values
+from ssm_localization.localization.confidence import feature_values, within_right
 from ssm_localization.localization.evidence import Evidence, unexplained_runs
 from ssm_localization.localization.verify import check_beams
 from ssm_localization.mapping.map_io import OccupancyMap
@@ -122,6 +122,17 @@ def test_calibrated_probability_interpolates_the_knots():
     assert dataclasses.replace(model, calibration=()).calibrated(0.0) == 0.5
     with pytest.raises(ValueError, match='knots'):
         dataclasses.replace(model, calibration=((1.0, 0.9), (-1.0, 0.1)))
+
+
+def test_within_right_is_the_gaussian_mass_inside_the_success_bounds():
+    assert within_right(np.diag([1e-6, 1e-6, 1e-8])) == pytest.approx(1.0)
+    # isotropic 0.5 m: 1 - exp(-1/2) in position, yaw certain
+    assert within_right(np.diag([0.25, 0.25, 1e-8])) == pytest.approx(1 - math.exp(-0.5))
+    # yaw std 5 deg: erf(1 / sqrt 2) = 0.6827
+    assert within_right(np.diag([1e-6, 1e-6, math.radians(5.0) ** 2])) == \
+        pytest.approx(0.6827, abs=1e-4)
+    grown = [within_right(np.diag([s ** 2, s ** 2, (s / 5) ** 2])) for s in (0.05, 0.2, 0.5, 2.0)]
+    assert grown == sorted(grown, reverse=True) and grown[-1] < 0.05
 
 
 def test_reliability_bins():

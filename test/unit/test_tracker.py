@@ -178,13 +178,47 @@ def test_lost_after_max_misses_then_global_again(track_bag):
     bag, odom, truth, _, loc = track_bag
     tracker = Tracker(loc, TrackerConfig(max_misses=1))
     tracker.track(bag.scans[0], odom[0])
+    # no return at all where the map has walls within the sensor's range: evidence, a miss
     blank = dataclasses.replace(bag.scans[1], ranges=np.full_like(bag.scans[1].ranges, np.inf))
-    tracker.track(blank, odom[1])
+    assert 'disagree with the map' in tracker.track(blank, odom[1]).message
     assert not tracker.lost
     tracker.track(blank, odom[2])
     assert tracker.lost                           # two misses in a row > max_misses = 1
     res = tracker.track(bag.scans[3], odom[3])
     assert res.mode == 'relocalized' and res.ok and _error(res.pose, truth[3])[0] < 0.3
+
+
+def test_a_scan_that_sees_nothing_where_the_map_has_nothing_in_range_coasts(track_bag):
+    """A short laser in the open: the prediction carries on, no miss, the confidence decays."""
+    bag, odom, truth, _, loc = track_bag
+    tracker = Tracker(loc, TrackerConfig(max_misses=1))
+    first = tracker.track(bag.scans[0], odom[0])
+    assert first.ok
+    # nothing within 0.3 m of the laser: the map agrees that such a sensor sees nothing here
+    blind = dataclasses.replace(bag.scans[1], ranges=np.full_like(bag.scans[1].ranges, np.inf),
+                                range_max=0.3)
+    confidences = []
+    for k in (1, 2, 3):
+        res = tracker.track(blind, odom[k])
+        assert res.mode == 'tracked' and 'coasting on odometry' in res.message, res.message
+        assert res.pose == res.predicted and tracker.pose == res.predicted
+        assert _error(res.pose, truth[k])[0] < 0.5
+        confidences.append(res.confidence)
+    assert not tracker.lost                   # three scans, max_misses 1: coasting is no miss
+    assert first.confidence >= confidences[0] >= confidences[1] >= confidences[2] > 0.0
+    res = tracker.track(bag.scans[4], odom[4])
+    assert res.mode == 'tracked' and res.ok and _error(res.pose, truth[4])[0] < 0.3, res.message
+
+
+def test_a_pose_that_is_not_ok_does_not_move_the_track(track_bag):
+    """Only an ok pose becomes the belief; otherwise the next scan is judged by the odometry."""
+    bag, odom, truth, _, loc = track_bag
+    tracker = Tracker(loc, TrackerConfig(min_confidence=1.0))    # nothing tracked is ever ok
+    assert tracker.track(bag.scans[0], odom[0]).ok                # (a global fix is)
+    for k in (1, 2, 3):
+        res = tracker.track(bag.scans[k], odom[k])
+        assert res.mode == 'tracked' and res.status == 'ambiguous', res.message
+        assert tracker.pose == res.predicted and tracker.pose != res.pose
 
 
 def test_set_prior_rejects_bad_input(track_bag):
