@@ -413,7 +413,8 @@ class Tracker:
         ``min_confidence`` on. Such a scan is no evidence against the track, so it is no miss:
         the next scan that sees enough is tracked in a window grown with the covariance (and
         cross-checked against the whole map when the window cannot hold it). Otherwise the
-        scan is evidence against the track: a miss.
+        scan is evidence against the track: a miss. A scan with no measurement at all (every
+        beam NaN or outside its range) is no evidence either way: ``failed``, no miss.
         """
         cfg = self.config
         angles, beams = scan_beams(scan.ranges, scan.angle_min, scan.angle_increment,
@@ -421,11 +422,14 @@ class Tracker:
         check = self.localizer.check_at(pred, angles, beams, scan.range_max)
         disagree = (check.missing + check.through) / max(check.beams, 1)
         common = {'covariance': pred_cov, 'predicted': pred, 'mode': TRACKED}
-        if check.beams == 0 or disagree > cfg.coast_disagreement:
+        if check.beams == 0:         # no measurement at all (NaN, out of range): no evidence
+            return self._result(t0, stamp, FAILED, pred, f'bad scan: {why}, and not one beam '
+                                'measured anything (NaN or outside [range_min, range_max])',
+                                **common)
+        if disagree > cfg.coast_disagreement:
             self._miss()
-            what = (f'bad scan: {why}, no beam measured anything' if check.beams == 0 else
-                    f'{why}: {disagree:.0%} of its beams disagree with the map at the prediction')
-            return self._result(t0, stamp, FAILED, pred, what, **common)
+            return self._result(t0, stamp, FAILED, pred, f'{why}: {disagree:.0%} of its beams '
+                                'disagree with the map at the prediction', **common)
         conf = self._confidence * within_right(pred_cov)
         status = OK if conf >= cfg.min_confidence else AMBIGUOUS
         return self._result(t0, stamp, status, pred, f'{why}: coasting on odometry, the map '

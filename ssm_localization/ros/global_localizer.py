@@ -476,7 +476,9 @@ class GlobalLocalizerNode(LifecycleNode):
                                    throttle_duration_sec=5.0)
             return
         self._publish(result.as_localization(), scan, False)
-        if result.mode != 'tracked':
+        if result.message.startswith('bad scan'):
+            self.get_logger().warning(f'track: {result.message}', throttle_duration_sec=2.0)
+        elif result.mode != 'tracked':
             self.get_logger().info(f'track: {result.mode}, {result.status}: {result.message}',
                                    throttle_duration_sec=1.0)
 
