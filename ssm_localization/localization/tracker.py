@@ -233,7 +233,7 @@ class Tracker:
         except SparseScan as exc:
             if pred is None:
                 return self._result(t0, stamp, FAILED, None, f'{note}bad scan: {exc}', mode=LOST)
-            return self._coast(t0, stamp, scan, pred, pred_cov, f'{note}{exc}')
+            return self._coast(t0, stamp, scan, pred, pred_cov, f'{note}{exc}', inc is not None)
         except (AttributeError, TypeError, ValueError) as exc:
             self._miss()
             return self._result(t0, stamp, FAILED, pred, f'{note}bad scan: {exc}',
@@ -401,7 +401,7 @@ class Tracker:
                             evidence=attempt.evidence)
 
     def _coast(self, t0: float, stamp: float, scan, pred: Pose2, pred_cov: np.ndarray,
-               why: str) -> TrackResult:
+               why: str, odometry: bool) -> TrackResult:
         """
         Carry the track over a scan with too few returns to track, if the map agrees.
 
@@ -415,6 +415,10 @@ class Tracker:
         cross-checked against the whole map when the window cannot hold it). Otherwise the
         scan is evidence against the track: a miss. A scan with no measurement at all (every
         beam NaN or outside its range) is no evidence either way: ``failed``, no miss.
+
+        With odometry, the prediction's floor (``min_step_std``: odometry and scan stamps out of
+        step) is an error of one scan's stamp, not a random walk: over scans the track coasts
+        through it is counted once, for the latest, and the odometry's own noise accumulates.
         """
         cfg = self.config
         angles, beams = scan_beams(scan.ranges, scan.angle_min, scan.angle_increment,
@@ -422,6 +426,10 @@ class Tracker:
         check = self.localizer.check_at(pred, angles, beams, scan.range_max)
         disagree = (check.missing + check.through) / max(check.beams, 1)
         common = {'covariance': pred_cov, 'predicted': pred, 'mode': TRACKED}
+        no_update = check.beams == 0 or disagree <= cfg.coast_disagreement
+        if no_update and odometry:
+            xy, yaw = cfg.min_step_std
+            self._cov = pred_cov - np.diag([xy ** 2, xy ** 2, yaw ** 2])
         if check.beams == 0:         # no measurement at all (NaN, out of range): no evidence
             return self._result(t0, stamp, FAILED, pred, f'bad scan: {why}, and not one beam '
                                 'measured anything (NaN or outside [range_min, range_max])',

@@ -208,6 +208,9 @@ def test_a_scan_that_sees_nothing_where_the_map_has_nothing_in_range_coasts(trac
         confidences.append(res.confidence)
     assert not tracker.lost                   # three scans, max_misses 1: coasting is no miss
     assert first.confidence >= confidences[0] >= confidences[1] >= confidences[2] > 0.0
+    # standing still: the stamps' floor is counted once, nothing accumulates, the confidence holds
+    still = [tracker.track(blind, odom[3]).confidence for _ in range(5)]
+    assert still == pytest.approx([still[0]] * 5, rel=1e-9)
     res = tracker.track(bag.scans[4], odom[4])
     assert res.mode == 'tracked' and res.ok and _error(res.pose, truth[4])[0] < 0.3, res.message
 
