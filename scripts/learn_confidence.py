@@ -28,8 +28,9 @@ probabilities; writes
 plus how far the scan's own pose lies from the motion prediction, on tracked answers of the
 calibration logs (Intel, ACES, FHW) through three sensors (as recorded, 3.5 m, 120 deg): the
 odd-numbered scans in order with odometry, the two-kidnap sequence, 20 random single kidnaps,
-and tracks started from a wrong prior (0.3-2.5 m and up to 20 deg off the truth, every 4th
-scan). The tracker runs with both confidence thresholds at 0, so that a wrong track it would
+20 slips the odometry misses (a verified track, then a scan 0.5-2.5 m on from the same stretch
+of the log: a wrong prediction the track's own history vouches for), and tracks started from a
+wrong prior (0.3-2.5 m and up to 20 deg off the truth, every 4th scan). The tracker runs with both confidence thresholds at 0, so that a wrong track it would
 keep by its rules alone is kept and labelled; its answers that the rules accept are fitted.
 
 Usage::
@@ -157,7 +158,15 @@ def track(args) -> list[Labelled]:
             i, j = (int(v) for v in rng.integers(KIDNAP_BEFORE - 1, len(real) - KIDNAP_AFTER, 2))
             if np.hypot(*(truth[i, :2] - truth[j, :2])) >= 1.0:
                 pairs.append((i, j))
-        sequences = [real, kidnap_sequence(real), splice_kidnaps(real, pairs)]
+        near = []                       # the odometry misses a slip of 0.5-2.5 m
+        while len(near) < 20:
+            i = int(rng.integers(KIDNAP_BEFORE - 1, len(real) - KIDNAP_AFTER - 8))
+            for j in range(i + 1, min(i + 8, len(real) - KIDNAP_AFTER)):
+                if 0.5 <= np.hypot(*(truth[i, :2] - truth[j, :2])) <= 2.5:
+                    near.append((i, j))
+                    break
+        sequences = [real, kidnap_sequence(real), splice_kidnaps(real, pairs),
+                     splice_kidnaps(real, near)]
         for sensor in TRACK_SENSORS:
             for seq in sequences:
                 run(name, sensor, Tracker(localizer, config), seq.scans, seq.odom, seq.truth)

@@ -83,7 +83,7 @@ class TrackerConfig:
     min_confidence: float = param(
         0.93, 'a tracked pose that passes the rules is ok only when its calibrated confidence '
         'P(right | evidence, prediction) reaches this (on the calibration logs: no wrong ok as '
-        'recorded or at 120 deg, 0.6 % at 3.5 m)')
+        'recorded or at 120 deg, 0.7 % at 3.5 m)')
     lost_confidence: float = param(
         0.5, 'a tracked pose less likely right than this has lost the track: the same scan '
         'goes through global localization')
