@@ -30,8 +30,9 @@ calibration logs (Intel, ACES, FHW) through three sensors (as recorded, 3.5 m, 1
 odd-numbered scans in order with odometry, the two-kidnap sequence, 20 random single kidnaps,
 20 slips the odometry misses (a verified track, then a scan 0.5-2.5 m on from the same stretch
 of the log: a wrong prediction the track's own history vouches for), and tracks started from a
-wrong prior (0.3-2.5 m and up to 20 deg off the truth, every 4th scan). The tracker runs with both confidence thresholds at 0, so that a wrong track it would
-keep by its rules alone is kept and labelled; its answers that the rules accept are fitted.
+wrong prior (0.3-2.5 m and up to 20 deg off the truth, every 4th scan). The tracker runs with
+both confidence thresholds at 0, so that a wrong track it would keep by its rules alone is kept
+and labelled; its answers that the rules accept are fitted.
 
 Usage::
 
