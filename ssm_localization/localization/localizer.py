@@ -70,7 +70,17 @@ Status = Literal['ok', 'ambiguous', 'failed']
 
 
 class SparseScan(ValueError):
-    """A well-formed scan with too few returns to match: an open space, a short-range laser."""
+    """
+    A well-formed scan with too few returns to match: an open space, a short-range laser.
+
+    It carries the scan's beams for the ray check (``angles``, ``beams``, ``range_max``: as a
+    :class:`Query` holds them), so that a caller can still compare it with the map.
+    """
+
+    def __init__(self, message: str, angles: np.ndarray, beams: np.ndarray,
+                 range_max: float) -> None:
+        super().__init__(message)
+        self.angles, self.beams, self.range_max = angles, beams, range_max
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,9 +147,7 @@ class Query:
         """
         key = (count, max_range)
         if key not in self._picked:
-            pick = np.unique(np.linspace(0, len(self.angles) - 1, count).astype(int))
-            self._picked[key] = (self.angles[pick], np.where(self.beams[pick] > max_range,
-                                                             np.inf, self.beams[pick]))
+            self._picked[key] = pick_beams(self.angles, self.beams, count, max_range)
         return self._picked[key]
 
 
@@ -193,6 +201,15 @@ def scan_beams(ranges, angle_min: float, angle_increment: float, range_min: floa
         keep = (((ranges >= range_min) & (ranges <= min(range_max, MAX_RANGE)))
                 | (ranges == np.inf))
     return angles[keep], ranges[keep]
+
+
+def pick_beams(angles: np.ndarray, beams: np.ndarray, count: int,
+               max_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``count`` evenly spaced beams: angles and ranges (``inf`` beyond ``max_range``)."""
+    if len(angles) == 0:
+        return angles, beams
+    pick = np.unique(np.linspace(0, len(angles) - 1, count).astype(int))
+    return angles[pick], np.where(beams[pick] > max_range, np.inf, beams[pick])
 
 
 def sensor_range(range_max: float) -> float:
@@ -337,7 +354,8 @@ class GlobalLocalizer:
                        range_max: float = math.inf) -> Query:
         """Return a :class:`Query` of laser-frame ``points`` (sweep order) and its beams."""
         if len(points) < self.config.min_points:
-            raise SparseScan(f'too few valid points ({len(points)} < {self.config.min_points})')
+            raise SparseScan(f'too few valid points ({len(points)} < {self.config.min_points})',
+                             angles, beams, sensor_range(range_max))
         return Query(features=prepare_scan(points, self.matcher_config), points=points,
                      angles=angles, beams=beams, range_max=sensor_range(range_max))
 
@@ -548,23 +566,17 @@ class GlobalLocalizer:
                      if h.check is None and h.explained >= best - margin]
         return out
 
-    def check_at(self, pose: Pose2, angles: np.ndarray, beams: np.ndarray,
-                 range_max: float = math.inf) -> BeamCheck:
+    def check_at(self, pose: Pose2, sparse: SparseScan) -> BeamCheck:
         """
-        Return the ray check of bare beams (laser frame, ``inf`` = no return) at a base pose.
+        Return the ray check of a scan too sparse to be a :class:`Query` at a base pose.
 
-        What :meth:`verify` does for a hypothesis, for a scan too sparse to be a :class:`Query`
-        (:func:`scan_beams` makes its beams): do its few returns and its no-returns agree with
-        the map there?
+        What :meth:`verify` does for a hypothesis: do its few returns and its no-returns agree
+        with the map there?
         """
         cfg = self.config
-        pick = np.unique(np.linspace(0, len(angles) - 1, cfg.verify_beams).astype(int)) \
-            if len(angles) else np.zeros(0, int)
-        measured = np.where(beams[pick] > cfg.max_cast_range, np.inf, beams[pick])
-        expected = self.caster.cast(np.array([self.laser_pose(pose)]), angles[pick],
-                                    cfg.max_cast_range)[0]
-        return check_beams(measured, expected, tol=cfg.beam_tolerance,
-                           range_limit=sensor_range(range_max))
+        angles, measured = pick_beams(sparse.angles, sparse.beams, cfg.verify_beams,
+                                      cfg.max_cast_range)
+        return self._checks([self.laser_pose(pose)], angles, measured, sparse.range_max)[0]
 
     def verify(self, query: Query, hyps: list[Hypothesis]) -> list[Hypothesis]:
         """Return ``hyps`` verified: the query's beams ray-cast from each (all at once)."""
@@ -572,14 +584,18 @@ class GlobalLocalizer:
             return []
         cfg = self.config
         angles, measured = query.picked_beams(cfg.verify_beams, cfg.max_cast_range)
-        expected = self.caster.cast(np.array([h.laser_pose for h in hyps]), angles,
-                                    cfg.max_cast_range)
-        out = []
-        for h, e in zip(hyps, expected):
-            check = check_beams(measured, e, tol=cfg.beam_tolerance, range_limit=query.range_max)
-            out.append(replace(h, check=check, score=h.explained
-                               - cfg.contradiction_weight * check.contradicting))
-        return out
+        checks = self._checks([h.laser_pose for h in hyps], angles, measured, query.range_max)
+        return [replace(h, check=check,
+                        score=h.explained - cfg.contradiction_weight * check.contradicting)
+                for h, check in zip(hyps, checks)]
+
+    def _checks(self, laser_poses: list[Pose2], angles: np.ndarray, measured: np.ndarray,
+                range_max: float) -> list[BeamCheck]:
+        """Ray-cast ``angles`` from each laser pose and compare with the ``measured`` ranges."""
+        cfg = self.config
+        expected = self.caster.cast(np.array(laser_poses), angles, cfg.max_cast_range)
+        return [check_beams(measured, e, tol=cfg.beam_tolerance, range_limit=range_max)
+                for e in expected]
 
     def polish(self, query: Query, h: Hypothesis) -> Hypothesis:
         """Return ``h`` after a last Gauss-Newton run on every endpoint of the scan."""

@@ -55,7 +55,7 @@ from .confidence import confidence, within_right
 from .evidence import covariance_stds, Evidence
 from .fusion import fuse_weak, lever_arm_covariance, mahalanobis2
 from .localizer import (AMBIGUOUS, distinct, FAILED, GlobalLocalizer, Hypothesis, Localization,
-                        OK, position_std, Query, scan_beams, SparseScan, Status, STATUSES)
+                        OK, position_std, Query, SparseScan, Status, STATUSES)
 from .motion import check_pose, Increment, predict
 from ..config.confidence import ConfidenceModel, TRACK_CONFIDENCE_MODEL
 from ..config.tracking import TrackerConfig
@@ -233,7 +233,7 @@ class Tracker:
         except SparseScan as exc:
             if pred is None:
                 return self._result(t0, stamp, FAILED, None, f'{note}bad scan: {exc}', mode=LOST)
-            return self._coast(t0, stamp, scan, pred, pred_cov, f'{note}{exc}', inc is not None)
+            return self._coast(t0, stamp, exc, pred, pred_cov, note, inc is not None)
         except (AttributeError, TypeError, ValueError) as exc:
             self._miss()
             return self._result(t0, stamp, FAILED, pred, f'{note}bad scan: {exc}',
@@ -400,8 +400,8 @@ class Tracker:
                             localization=glob, confidence=min(attempt.confidence, 0.5),
                             evidence=attempt.evidence)
 
-    def _coast(self, t0: float, stamp: float, scan, pred: Pose2, pred_cov: np.ndarray,
-               why: str, odometry: bool) -> TrackResult:
+    def _coast(self, t0: float, stamp: float, sparse: SparseScan, pred: Pose2,
+               pred_cov: np.ndarray, note: str, odometry: bool) -> TrackResult:
         """
         Carry the track over a scan with too few returns to track, if the map agrees.
 
@@ -421,23 +421,21 @@ class Tracker:
         through it is counted once, for the latest, and the odometry's own noise accumulates.
         """
         cfg = self.config
-        angles, beams = scan_beams(scan.ranges, scan.angle_min, scan.angle_increment,
-                                   scan.range_min, scan.range_max)
-        check = self.localizer.check_at(pred, angles, beams, scan.range_max)
+        why = f'{note}{sparse}'
+        check = self.localizer.check_at(pred, sparse)
         disagree = (check.missing + check.through) / max(check.beams, 1)
         common = {'covariance': pred_cov, 'predicted': pred, 'mode': TRACKED}
-        no_update = check.beams == 0 or disagree <= cfg.coast_disagreement
-        if no_update and odometry:
+        if disagree > cfg.coast_disagreement:
+            self._miss()
+            return self._result(t0, stamp, FAILED, pred, f'{why}: {disagree:.0%} of its beams '
+                                'disagree with the map at the prediction', **common)
+        if odometry:                 # no update: the stamps' floor goes with the next scan
             xy, yaw = cfg.min_step_std
             self._cov = pred_cov - np.diag([xy ** 2, xy ** 2, yaw ** 2])
         if check.beams == 0:         # no measurement at all (NaN, out of range): no evidence
             return self._result(t0, stamp, FAILED, pred, f'bad scan: {why}, and not one beam '
                                 'measured anything (NaN or outside [range_min, range_max])',
                                 **common)
-        if disagree > cfg.coast_disagreement:
-            self._miss()
-            return self._result(t0, stamp, FAILED, pred, f'{why}: {disagree:.0%} of its beams '
-                                'disagree with the map at the prediction', **common)
         conf = self._confidence * within_right(pred_cov)
         status = OK if conf >= cfg.min_confidence else AMBIGUOUS
         return self._result(t0, stamp, status, pred, f'{why}: coasting on odometry, the map '

@@ -476,7 +476,7 @@ class GlobalLocalizerNode(LifecycleNode):
                                    throttle_duration_sec=5.0)
             return
         self._publish(result.as_localization(), scan, False)
-        if result.message.startswith('bad scan'):
+        if result.mode == 'tracked' and result.status == 'failed':     # a bad or blind scan
             self.get_logger().warning(f'track: {result.message}', throttle_duration_sec=2.0)
         elif result.mode != 'tracked':
             self.get_logger().info(f'track: {result.mode}, {result.status}: {result.message}',
