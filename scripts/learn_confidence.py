@@ -12,19 +12,20 @@ the TurtleBot3 maps are the validation split, never looked at here:
   at 3.5 m and at 120 deg; never right.
 Every answer comes from the localizer with ``min_confidence`` 0, so that its status says whether
 the rules alone accept the pose. The model is fitted on the answers the rules accept (those are
-the ones it decides): a logistic regression of the evidence, then an isotonic map of its score to
-a probability, fitted on scores cross-fitted by building (each building scored by a regression
+the ones it decides): boosted regression trees on the evidence (``calibration.BOOSTING``; a
+score that can weigh one piece of evidence by another, which a logistic regression cannot),
+then an isotonic map of the score to a probability, fitted on scores cross-fitted by building (each building scored by a regression
 that did not see it). Foreign answers are weighted to make up ``--foreign-share`` of all answers
 (28 %: the share in ``bench localize --sensors ... --foreign``'s protocol), so the probabilities
 are calibrated for that mix. An answer the rules refuse reports the rate at which such answers
 were right here (same weights), by reason. Prints the fit, a table of thresholds (precision of
 the own answers, ``ok`` rate of the foreign ones) and the reliability of the fitted
-probabilities; writes
-``config/confidence_model.yaml``. Copy the printed model into
-``ssm_localization/config/confidence.py:CONFIDENCE_MODEL`` (a test checks the two agree) and pick
-``LocalizerConfig.min_confidence`` from the table.
+probabilities; writes ``ssm_localization/config/confidence_model.json`` (package data, loaded as
+``CONFIDENCE_MODEL``). Pick ``LocalizerConfig.min_confidence`` from the table.
 
-``--tracker`` fits the tracker's model instead (``TRACK_CONFIDENCE_MODEL``): the same evidence
+``--tracker`` fits the tracker's model instead (``TRACK_CONFIDENCE_MODEL``, a logistic
+regression written to ``config/track_confidence_model.yaml`` and copied into
+``config/confidence.py``): the same evidence
 plus how far the scan's own pose lies from the motion prediction, on tracked answers of the
 calibration logs (Intel, ACES, FHW) through three sensors (as recorded, 3.5 m, 120 deg): the
 odd-numbered scans in order with odometry, the two-kidnap sequence, 20 random single kidnaps,
@@ -61,7 +62,7 @@ from ssm_localization.bench.places import (answers_on, foreign, load_place,  # n
 from ssm_localization.config.confidence import REFUSED_REASONS  # noqa: E402
 from ssm_localization.config.localization import LocalizerConfig  # noqa: E402
 from ssm_localization.config.tracking import TrackerConfig  # noqa: E402
-from ssm_localization.evaluation.calibration import (fit_confidence,  # noqa: E402
+from ssm_localization.evaluation.calibration import (BOOSTING, fit_confidence,  # noqa: E402
                                                      format_reliability, reliability)
 from ssm_localization.evaluation.replay import within_success  # noqa: E402
 from ssm_localization.io.sensors import EVERYDAY_SENSORS  # noqa: E402
@@ -76,12 +77,23 @@ import yaml  # noqa: E402, I100
 CALIBRATION = ('intel', 'aces', 'fhw', 'depot', 'empty_room')
 TRACK_LOGS = ('intel', 'aces', 'fhw')
 TRACK_SENSORS = ('full', 'range3.5', 'fov120')
-#: 'hit' is left out (hit + through + short = 1 over the returns), and so is the count of returns
-#: (the scan's length and extent say how much it sees, independently of the beam count)
-FEATURES = ('through', 'short', 'missing', 'on_wall', 'unknown', 'unexplained_runs', 'explained',
-            'margin', 'log_position_std', 'log_yaw_std', 'log_scan_length', 'log_extent')
-TRACK_FEATURES = FEATURES + ('log_prior_distance', 'log_scan_position_std')
-DEFAULT_OUT = ROOT / 'config' / 'confidence_model.yaml'
+#: 'hit' is left out (hit + through + short = 1 over the returns)
+LINEAR_FEATURES = ('through', 'short', 'missing', 'on_wall', 'unknown', 'unexplained_runs',
+                   'explained', 'margin', 'log_position_std', 'log_yaw_std', 'log_scan_length',
+                   'log_extent')
+#: the global model's: how many distinct places score nearly as well, how much of the scan
+#: returned at all, and how many returns were checked
+FEATURES = LINEAR_FEATURES + ('close_rivals', 'near_rivals', 'return_fraction', 'log_returns')
+TRACK_FEATURES = LINEAR_FEATURES + ('log_prior_distance', 'log_scan_position_std')
+#: the direction in which each feature may move the global model's score (+1 up, -1 down; left
+#: out: free): worse evidence never earns more trust, also far outside the calibration data
+#: (``short`` is clutter in front of a right pose's walls as often as a wrong pose's; how much
+#: of the scan returned depends on the place as much as on the pose)
+MONOTONE = {'through': -1, 'missing': -1, 'on_wall': 1, 'unknown': -1, 'unexplained_runs': -1,
+            'explained': 1, 'margin': 1, 'log_position_std': -1, 'log_yaw_std': -1,
+            'log_scan_length': 1, 'log_extent': 1, 'close_rivals': -1, 'near_rivals': -1,
+            'log_returns': 1}
+DEFAULT_OUT = ROOT / 'ssm_localization' / 'config' / 'confidence_model.json'
 DEFAULT_TRACK_OUT = ROOT / 'config' / 'track_confidence_model.yaml'
 DEFAULT_CACHE = Path('bench_data') / 'confidence_answers.json'
 DEFAULT_TRACK_CACHE = Path('bench_data') / 'track_confidence_answers.json'
@@ -120,7 +132,11 @@ class Labelled:
 def collect(args) -> list[Labelled]:
     """Localize the calibration split's answers (or read them from ``--cache``)."""
     if args.cache and args.cache.exists() and not args.fresh:
-        return [Labelled(**d) for d in json.loads(args.cache.read_text())]
+        cached = [Labelled(**d) for d in json.loads(args.cache.read_text())]
+        need = set(TRACK_FEATURES if args.tracker else FEATURES)
+        if all(a.values is None or need <= set(a.values) for a in cached):
+            return cached
+        print(f'{args.cache} lacks some features: localizing again', flush=True)
     if args.tracker:
         answers = track(args)
     else:
@@ -243,13 +259,15 @@ def main(argv=None) -> int:
     values = [a.values for a in accepted]
     labels = [a.right for a in accepted]
     model = fit_confidence(values, labels, FEATURES, groups=[a.map for a in accepted],
-                           l2=args.l2, weight=[weight[id(a)] for a in accepted],
-                           refused=refused, split='calibration: ' + ', '.join(CALIBRATION))
+                           weight=[weight[id(a)] for a in accepted], refused=refused,
+                           split='calibration: ' + ', '.join(CALIBRATION),
+                           boosted=dict(BOOSTING, monotone=[MONOTONE.get(f, 0) for f in FEATURES]))
     p = np.array([model.probability(v) for v in values])
-    print(f'{len(accepted)} answers the rules accept ({sum(labels)} right); weights on '
-          f'standardised features (isotonic map: {len(model.calibration)} knots):')
-    for name, w in zip(model.features, model.weights):
-        print(f'  {name:18s} {w:+.3f}')
+    print(f'{len(accepted)} answers the rules accept ({sum(labels)} right); {len(model.trees)} '
+          f'trees (isotonic map: {len(model.calibration)} knots); splits per feature:')
+    splits = Counter(model.features[n[0]] for t in model.trees for n in t if n[0] >= 0)
+    for name in model.features:
+        print(f'  {name:18s} {splits[name]}')
     real_own = np.array([a.own and a.map in REAL_PLACES for a in accepted])
     own_full = [a for a in answers if a.own and a.map in REAL_PLACES and a.sensor == 'full']
     n_foreign = Counter(a.sensor for a in answers if not a.own)
@@ -278,7 +296,6 @@ def main(argv=None) -> int:
     print('(in-sample; bench localize --foreign --reliability measures it on the validation '
           'split)')
     write_model(args, model, len(accepted), sum(labels))
-    print('CONFIDENCE_MODEL = ' + repr(model))
     return 0
 
 
@@ -317,15 +334,18 @@ def fit_tracker(args) -> int:
 
 
 def write_model(args, model, answers: int, right: int) -> None:
-    """Write the model to ``--out`` (YAML, safe_dump)."""
+    """Write the model to ``--out``: JSON (the global model, package data) or YAML (safe_dump)."""
     doc = {'fitted_by': 'scripts/learn_confidence.py' + (' --tracker' if args.tracker else ''),
            'date': datetime.date.today().isoformat(), 'answers': answers, 'right': int(right),
-           'model': {k: ([list(v) if isinstance(v, tuple) else v for v in x]
-                         if k == 'calibration' else list(x) if isinstance(x, tuple) else x)
-                     for k, x in dataclasses.asdict(model).items()}}
+           'model': json.loads(json.dumps(dataclasses.asdict(model)))}
+    if not model.trees:
+        del doc['model']['trees']
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    header = '# The confidence model P(right | evidence); see scripts/learn_confidence.py\n'
-    args.out.write_text(header + yaml.safe_dump(doc, sort_keys=False))
+    if args.out.suffix == '.json':
+        args.out.write_text(json.dumps(doc, indent=None, separators=(',', ':')) + '\n')
+    else:
+        header = '# The confidence model P(right | evidence); see scripts/learn_confidence.py\n'
+        args.out.write_text(header + yaml.safe_dump(doc, sort_keys=False))
     print(f'wrote {args.out}')
 
 

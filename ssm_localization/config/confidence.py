@@ -1,18 +1,22 @@
 """
 The calibrated confidence model: ``P(right | evidence)``.
 
-A logistic regression weighs the evidence of an answer into one score (its log-odds); an
-isotonic (monotone, piecewise-linear) map, fitted on scores of buildings the regression did not
-see, turns the score into a probability. ``scripts/learn_confidence.py`` fits both on labelled
-answers of the calibration split (right poses, wrong places in the same building, scans of other
-buildings) and writes ``config/confidence_model.yaml``; :data:`CONFIDENCE_MODEL` is copied from
-that file (a test checks they agree). The paper itself learns its pairwise potentials by
-logistic regression (section II.B); here the same tool weighs the evidence of a whole answer.
+A score weighs the evidence of an answer (its log-odds of being right); an isotonic (monotone,
+piecewise-linear) map, fitted on scores of buildings the score's fit did not see, turns it into a
+probability. ``scripts/learn_confidence.py`` fits both on labelled answers of the calibration
+split (right poses, wrong places in the same building, scans of other buildings). The global
+answers' score (:data:`CONFIDENCE_MODEL`) is boosted regression trees, kept as package data in
+``confidence_model.json`` beside this module; the tracker's (:data:`TRACK_CONFIDENCE_MODEL`) is a
+logistic regression, copied here from ``config/track_confidence_model.yaml`` (a test checks they
+agree). The paper itself learns its pairwise potentials by logistic regression (section II.B);
+here the same loss weighs the evidence of a whole answer.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import json
 import math
+from pathlib import Path
 
 #: what "right" means wherever a confidence is fitted or measured: within this of the truth
 RIGHT_XY = 0.5                      # metres
@@ -24,13 +28,18 @@ REFUSED_REASONS = {'implausible': 0.0, 'rival': 0.5, 'degenerate': 0.5}
 @dataclass(frozen=True)
 class ConfidenceModel:
     """
-    ``P(right) = 1 / (1 + exp(-(intercept + sum_k w_k (f_k - mean_k) / scale_k)))``.
+    ``P(right) = calibrated(intercept + sum_k w_k (f_k - mean_k) / scale_k + sum_t tree_t(f))``.
 
     ``features`` name the inputs (see ``localization/confidence.py`` for how each is made from
-    the evidence of an answer); ``calibration`` the isotonic map from that log-odds to the
-    probability, as ``(log-odds, probability)`` knots in increasing order, interpolated linearly
-    and held constant beyond the ends (empty: the logistic probability itself); ``split`` names
-    the data it was fitted on.
+    the evidence of an answer). The score (log-odds) has a linear part (``mean``, ``scale``,
+    ``weights``; empty: none) and a boosted part (``trees``; empty: none): small regression
+    trees on the raw features, each a tuple of nodes ``(feature, threshold, left, right,
+    value)``, node 0 the root; a node with ``feature`` -1 is a leaf worth ``value``, any other
+    sends an answer to the node ``left`` when its feature is at most ``threshold``, else to
+    ``right``. ``calibration`` is the isotonic map from the score to the probability, as
+    ``(log-odds, probability)`` knots in increasing order, interpolated linearly and held
+    constant beyond the ends (empty: the logistic probability itself); ``split`` names the
+    data it was fitted on.
     """
 
     features: tuple[str, ...]
@@ -45,6 +54,7 @@ class ConfidenceModel:
     refused: dict[str, float] = field(default_factory=lambda: dict(REFUSED_REASONS))
     calibration: tuple[tuple[float, float], ...] = ()
     split: str = ''
+    trees: tuple[tuple[tuple[int, float, int, int, float], ...], ...] = ()
 
     def __post_init__(self) -> None:
         if set(self.refused) != set(REFUSED_REASONS) or not all(
@@ -52,7 +62,8 @@ class ConfidenceModel:
             raise ValueError(f'ConfidenceModel.refused: a rate in [0, 1] for each of '
                              f'{sorted(REFUSED_REASONS)}, got {self.refused!r}')
         n = len(self.features)
-        if not (len(self.mean) == len(self.scale) == len(self.weights) == n):
+        linear = (len(self.mean), len(self.scale), len(self.weights))
+        if linear not in ((n, n, n), (0, 0, 0)) or (n == 0):
             raise ValueError(f'ConfidenceModel: {n} features but {len(self.mean)} means, '
                              f'{len(self.scale)} scales and {len(self.weights)} weights')
         knots = [v for k in self.calibration for v in k]
@@ -62,16 +73,26 @@ class ConfidenceModel:
                 or any(a[0] > b[0] or a[1] > b[1] for a, b in pairs)):
             raise ValueError('ConfidenceModel.calibration: (log-odds, probability) knots, both '
                              'increasing, probabilities in [0, 1]')
-        values = (*self.mean, *self.scale, *self.weights, self.intercept, *knots)
+        for tree in self.trees:
+            _check_tree(tree, n)
+        nodes = [v for tree in self.trees for node in tree for v in (node[1], node[4])]
+        values = (*self.mean, *self.scale, *self.weights, self.intercept, *knots, *nodes)
         if not all(math.isfinite(v) for v in values) or min(self.scale, default=1.0) <= 0.0:
-            raise ValueError('ConfidenceModel: means, weights and the intercept must be finite '
-                             'and scales > 0')
+            raise ValueError('ConfidenceModel: means, weights, tree nodes and the intercept '
+                             'must be finite and scales > 0')
 
     def logit(self, values: dict[str, float]) -> float:
         """Return the log-odds of a right pose given the feature ``values`` by name."""
         z = self.intercept
         for name, m, s, w in zip(self.features, self.mean, self.scale, self.weights):
             z += w * (values[name] - m) / s
+        if self.trees:
+            x = [values[name] for name in self.features]
+            for tree in self.trees:
+                node = tree[0]
+                while node[0] >= 0:
+                    node = tree[node[2] if x[node[0]] <= node[1] else node[3]]
+                z += node[4]
         return z
 
     def probability(self, values: dict[str, float]) -> float:
@@ -90,54 +111,42 @@ class ConfidenceModel:
                 return p0 + (p1 - p0) * (z - z0) / (z1 - z0) if z1 > z0 else p1
         return knots[-1][1]
 
+    @classmethod
+    def from_dict(cls, doc: dict) -> 'ConfidenceModel':
+        """Return the model of a mapping as ``scripts/learn_confidence.py`` writes it."""
+        tuples = {k: tuple(doc.get(k, ())) for k in ('features', 'mean', 'scale', 'weights')}
+        return cls(**tuples, intercept=float(doc['intercept']),
+                   refused={k: float(v) for k, v in doc['refused'].items()},
+                   calibration=tuple((float(z), float(p)) for z, p in doc['calibration']),
+                   split=str(doc.get('split', '')),
+                   trees=tuple(tuple((int(f), float(t), int(lo), int(hi), float(v))
+                                     for f, t, lo, hi, v in tree)
+                               for tree in doc.get('trees', ())))
 
-#: fitted by ``scripts/learn_confidence.py`` on the calibration split
-#: (``config/confidence_model.yaml``, 2026-11-25: 3203 answers the rules accept, 2654 right)
-CONFIDENCE_MODEL = ConfidenceModel(
-    features=('through', 'short', 'missing',
-              'on_wall', 'unknown', 'unexplained_runs',
-              'explained', 'margin', 'log_position_std',
-              'log_yaw_std', 'log_scan_length', 'log_extent'),
-    mean=(
-        0.061737884173253176, 0.059048039330351985, 0.040979810594234826,
-        0.9465888174625001, 0.06542114338384186, 0.012606268610343125,
-        0.8918968850280238, 0.4597411864774715, -2.9061719145890135,
-        -4.3217732550686145, 2.415691351902958, 1.9726511730698846,
-    ),
-    scale=(
-        0.0962014736204141, 0.09190130334598885, 0.1267887832878405,
-        0.094754201162173, 0.08434103515138576, 0.05649760874817434,
-        0.1026359272780082, 0.3110929128251355, 0.23013394607136886,
-        0.423691626786044, 0.6011974902500591, 0.6712588041146128,
-    ),
-    weights=(
-        -0.30288661696267766, 0.4417321462560222, -1.337595961415421,
-        0.5284667825502662, -0.40136689342186527, -0.36165228135918176,
-        0.8859437213098846, 1.7960709879717838, -0.22599870865186175,
-        -0.3931027027533198, 0.3038628595345358, 0.48360244883349496,
-    ),
-    intercept=4.21991077920179,
-    refused={'implausible': 0.0015, 'rival': 0.1205, 'degenerate': 0.1421},
-    calibration=(
-        (-6.2884769908339, 0.003765985825247809),
-        (-3.2841775126653543, 0.1134995700773862),
-        (-2.1747546438726273, 0.1477622543215724),
-        (-1.4411402488219238, 0.19289026275115917),
-        (-0.6390223087131153, 0.30188679245283034),
-        (0.26429176265076254, 0.46369449861671735),
-        (0.8764423880968771, 0.7357926221335991),
-        (1.2231698344389301, 0.7722369475436108),
-        (1.563903483989717, 0.8910994158810942),
-        (1.847965458309947, 0.9254092057563441),
-        (2.2446111875734767, 0.9424509140148952),
-        (2.552026682223251, 0.9424509140148952),
-        (2.7219352371068273, 0.9601954596355493),
-        (3.1553049019642097, 0.9866989117291415),
-        (3.8461675338308194, 0.9866989117291415),
-        (4.8661983106242745, 0.9952673019376471),
-        (7.793746886497953, 0.9995951417004049),
-    ),
-    split='calibration: intel, aces, fhw, depot, empty_room')
+
+def _check_tree(tree, features: int) -> None:
+    """Raise ``ValueError`` unless ``tree`` is a tree of ``(feature, threshold, left, right,
+    value)`` nodes whose splits name one of ``features`` inputs and lead to later nodes."""
+    ok = len(tree) > 0
+    for k, node in enumerate(tree):
+        if len(node) != 5:
+            ok = False
+            break
+        f, _, lo, hi, _ = node
+        if f >= 0 and not (f < features and k < lo < len(tree) and k < hi < len(tree)):
+            ok = False
+    if not ok:
+        raise ValueError('ConfidenceModel.trees: nodes (feature, threshold, left, right, value) '
+                         'with features in range and children after their parent')
+
+
+def load_model(path: Path) -> ConfidenceModel:
+    """Return the model of a JSON file written by ``scripts/learn_confidence.py``."""
+    return ConfidenceModel.from_dict(json.loads(path.read_text(encoding='utf-8'))['model'])
+
+
+#: fitted by ``scripts/learn_confidence.py`` on the calibration split (boosted trees)
+CONFIDENCE_MODEL = load_model(Path(__file__).with_name('confidence_model.json'))
 
 #: the tracker's, fitted by ``scripts/learn_confidence.py --tracker`` on tracked answers
 #: (``config/track_confidence_model.yaml``, 2026-11-25: 7285 answers the rules accept, 7253 right)

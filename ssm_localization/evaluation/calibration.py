@@ -1,7 +1,8 @@
 """
 Calibration of the confidence: fitting ``P(right | evidence)`` and measuring its reliability.
 
-``fit_confidence`` is the logistic regression and isotonic map of ``scripts/learn_confidence.py``;
+``fit_confidence`` is the score (a logistic regression, or boosted regression trees) and the
+isotonic map of ``scripts/learn_confidence.py``;
 ``reliability`` bins answers by their reported confidence and compares each bin's mean
 confidence with the fraction of its answers that were right (a reliability diagram, drawn by
 ``plotting.plot_reliability``).
@@ -49,6 +50,137 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None,
     return mean, scale, w[1:], float(w[0])
 
 
+#: boosted trees: rounds, learning rate, depth, least weight in a leaf, L2 on leaf values, bins
+BOOSTING = {'rounds': 150, 'rate': 0.1, 'depth': 2, 'min_leaf': 40.0, 'l2': 1.0, 'bins': 32}
+
+
+def fit_boosted(x: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None,
+                rounds: int = 150, rate: float = 0.1, depth: int = 2, min_leaf: float = 40.0,
+                l2: float = 1.0, bins: int = 32,
+                monotone: Sequence[int] | None = None,
+                start: np.ndarray | None = None) -> tuple[float, tuple]:
+    """
+    Return ``(intercept, trees)``: gradient-boosted regression trees on the logistic loss.
+
+    Each round fits a tree of at most ``depth`` splits to the loss's gradient with Newton leaf
+    values ``-G / (H + l2)`` (second-order boosting), scaled by ``rate``. Splits are searched at
+    ``bins`` quantiles of each feature; a leaf holds at least ``min_leaf`` of the sample weight
+    (no leaf rests on a handful of answers). Unlike the linear score it can weigh one piece of
+    evidence by another: a lead over the rivals means more when the scan sees much.
+    ``monotone`` gives each feature's direction (+1: the score never falls as it grows, -1:
+    never rises, 0: free): a split that would break it is not taken, and the leaves below a
+    split are bounded by the midpoint of its two values, so every tree, and their sum, keeps
+    the directions everywhere, also far outside the data (worse evidence never earns more
+    trust). ``start``: a score to boost from (e.g. a logistic regression's log-odds; the
+    intercept is then 0). Trees are tuples of ``(feature, threshold, left, right, value)``
+    nodes (``ConfidenceModel.trees``).
+    """
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    sw = np.ones(len(y)) if weight is None else np.asarray(weight, dtype=float)
+    if len(y) == 0 or y.min() == y.max():
+        raise ValueError('calibration needs right and wrong answers')
+    direction = np.zeros(x.shape[1], int) if monotone is None else np.asarray(monotone, int)
+    if direction.shape != (x.shape[1],):
+        raise ValueError(f'monotone: one direction per feature ({x.shape[1]})')
+    p0 = float(np.clip(np.sum(sw * y) / np.sum(sw), 1e-6, 1.0 - 1e-6))
+    intercept = math.log(p0 / (1.0 - p0)) if start is None else 0.0
+    cuts = [np.unique(np.quantile(x[:, j], np.linspace(0.0, 1.0, bins + 1)[1:-1]))
+            for j in range(x.shape[1])]
+    # code k <=> x <= cuts[k] (and above cuts[k - 1])
+    codes = np.column_stack([np.searchsorted(c, x[:, j], side='left')
+                             for j, c in enumerate(cuts)])
+    grow = _Grower(codes, cuts, direction, sw, depth, min_leaf, l2, rate)
+    score = np.full(len(y), intercept) if start is None else np.asarray(start, float).copy()
+    trees = []
+    for _ in range(rounds):
+        p = 1.0 / (1.0 + np.exp(-score))
+        tree = grow.tree(sw * (p - y), sw * p * (1.0 - p))
+        trees.append(tree)
+        score += tree_values(tree, x)
+    return intercept, tuple(trees)
+
+
+@dataclass
+class _Grower:
+    """One regression tree per call of :meth:`tree`, on binned features (:func:`fit_boosted`)."""
+
+    codes: np.ndarray
+    cuts: list
+    direction: np.ndarray
+    sw: np.ndarray
+    depth: int
+    min_leaf: float
+    l2: float
+    rate: float
+
+    def tree(self, g: np.ndarray, h: np.ndarray) -> tuple:
+        nodes: list[tuple[int, float, int, int, float]] = []
+        self._grow(nodes, g, h, np.arange(len(g)), self.depth, -math.inf, math.inf)
+        return tuple(nodes)
+
+    def _grow(self, nodes: list, g: np.ndarray, h: np.ndarray, idx: np.ndarray, depth: int,
+              low: float, high: float) -> int:
+        """Append the (sub)tree of the answers ``idx`` to ``nodes``; return its root's index."""
+        k = len(nodes)
+        big_g, big_h, weight = float(g[idx].sum()), float(h[idx].sum()), float(self.sw[idx].sum())
+        nodes.append((-1, 0.0, -1, -1,
+                      self.rate * min(max(-big_g / (big_h + self.l2), low), high)))
+        if depth == 0 or weight < 2.0 * self.min_leaf:
+            return k
+        parent, best, where = big_g * big_g / (big_h + self.l2), 1e-9, None
+        for j, c in enumerate(self.cuts):
+            if len(c) == 0:
+                continue
+            cj = self.codes[idx, j]
+            gl = np.cumsum(np.bincount(cj, g[idx], len(c) + 1))[:-1]
+            hl = np.cumsum(np.bincount(cj, h[idx], len(c) + 1))[:-1]
+            wl = np.cumsum(np.bincount(cj, self.sw[idx], len(c) + 1))[:-1]
+            gr, hr = big_g - gl, big_h - hl
+            gain = gl ** 2 / (hl + self.l2) + gr ** 2 / (hr + self.l2) - parent
+            gain[(wl < self.min_leaf) | (weight - wl < self.min_leaf)] = -np.inf
+            if self.direction[j]:
+                left, right = -gl / (hl + self.l2), -gr / (hr + self.l2)
+                gain[self.direction[j] * (right - left) < 0.0] = -np.inf
+            b = int(np.argmax(gain))
+            if gain[b] > best:
+                best, where = float(gain[b]), (j, b)
+        if where is None:
+            return k
+        j, b = where
+        go_left = self.codes[idx, j] <= b
+        lo_kids, hi_kids = (low, high), (low, high)
+        if self.direction[j]:
+            values = [min(max(-g[part].sum() / (h[part].sum() + self.l2), low), high)
+                      for part in (idx[go_left], idx[~go_left])]
+            mid = 0.5 * (values[0] + values[1])
+            if self.direction[j] > 0:        # the left subtree stays below the right one
+                lo_kids, hi_kids = (low, mid), (mid, high)
+            else:
+                lo_kids, hi_kids = (mid, high), (low, mid)
+        left = self._grow(nodes, g, h, idx[go_left], depth - 1, *lo_kids)
+        right = self._grow(nodes, g, h, idx[~go_left], depth - 1, *hi_kids)
+        nodes[k] = (j, float(self.cuts[j][b]), left, right, 0.0)
+        return k
+
+
+def tree_values(tree: tuple, x: np.ndarray) -> np.ndarray:
+    """Return the value of ``tree`` (``ConfidenceModel.trees``) for each row of ``x``."""
+    at = np.zeros(len(x), dtype=int)
+    feature = np.array([n[0] for n in tree])
+    threshold = np.array([n[1] for n in tree])
+    left, right = np.array([n[2] for n in tree]), np.array([n[3] for n in tree])
+    rows = np.arange(len(x))
+    for _ in range(len(tree)):
+        f = feature[at]
+        inner = f >= 0
+        if not inner.any():
+            break
+        go_left = x[rows[inner], f[inner]] <= threshold[at[inner]]
+        at[inner] = np.where(go_left, left[at[inner]], right[at[inner]])
+    return np.array([n[4] for n in tree])[at]
+
+
 def isotonic_knots(z: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None,
                    min_weight: float = 25.0) -> tuple[tuple[float, float], ...]:
     """
@@ -89,31 +221,45 @@ def isotonic_knots(z: np.ndarray, y: np.ndarray, weight: np.ndarray | None = Non
 def fit_confidence(values: Sequence[dict[str, float]], right: Sequence[bool],
                    features: Sequence[str], groups: Sequence[str], l2: float = 10.0,
                    weight: Sequence[float] | None = None, refused: dict[str, float] | None = None,
-                   split: str = '') -> ConfidenceModel:
+                   split: str = '', boosted: dict | None = None) -> ConfidenceModel:
     """
-    Fit ``P(right | features)``: a logistic score, then an isotonic map of it to a probability.
+    Fit ``P(right | features)``: a score, then an isotonic map of it to a probability.
 
-    ``values`` the feature values of each answer (``confidence.feature_values``), ``right`` its
-    label, ``groups`` the building it comes from, ``weight`` its weight. The logistic regression
-    is fitted on every answer; the isotonic map on *cross-fitted* scores -- each building's
-    answers scored by a regression fitted without that building -- so the probabilities are
-    those of a building the regression has not seen.
+    The score is a logistic regression (L2 ``l2``), with ``boosted`` (the keywords of
+    :func:`fit_boosted`, e.g. :data:`BOOSTING`) plus boosted regression trees grown from it
+    (the regression carries the evidence beyond the data, the trees how one piece of it weighs
+    another). ``values`` the
+    feature values of each answer (``confidence.feature_values``), ``right`` its label,
+    ``groups`` the building it comes from, ``weight`` its weight. The score is fitted on every
+    answer; the isotonic map on *cross-fitted* scores -- each building's answers scored by a
+    model fitted without that building -- so the probabilities are those of a building the
+    model has not seen.
     """
     x = np.array([[v[f] for f in features] for v in values], dtype=float)
     y = np.asarray(right, dtype=float)
     sw = np.ones(len(y)) if weight is None else np.asarray(weight, dtype=float)
     g = np.asarray(groups)
+
+    def fit(rows):
+        mean, scale, w, b = fit_logistic(x[rows], y[rows], sw[rows], l2)
+        trees = ()
+        if boosted is not None:
+            _, trees = fit_boosted(x[rows], y[rows], sw[rows], **boosted,
+                                   start=b + ((x[rows] - mean) / scale) @ w)
+        return (lambda z: b + ((z - mean) / scale) @ w
+                + sum((tree_values(t, z) for t in trees), np.zeros(len(z)))), \
+            (mean, scale, w, b, trees)
+
     held = np.zeros(len(y))
     for name in np.unique(g):
         out = g == name
-        mean, scale, w, b = fit_logistic(x[~out], y[~out], sw[~out], l2)
-        held[out] = b + ((x[out] - mean) / scale) @ w
-    mean, scale, w, b = fit_logistic(x, y, sw, l2)
+        held[out] = fit(~out)[0](x[out])
+    mean, scale, w, b, trees = fit(np.ones(len(y), bool))[1]
     return ConfidenceModel(features=tuple(features), mean=tuple(float(v) for v in mean),
                            scale=tuple(float(v) for v in scale),
-                           weights=tuple(float(v) for v in w), intercept=b,
+                           weights=tuple(float(v) for v in w), intercept=float(b),
                            refused=dict(refused or REFUSED_REASONS),
-                           calibration=isotonic_knots(held, y, sw), split=split)
+                           calibration=isotonic_knots(held, y, sw), split=split, trees=trees)
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,9 @@
 """
 ``P(right | evidence)``: the calibrated confidence reported with every answer (beyond the paper).
 
-The model (``config/confidence.py``) is a logistic regression on the features below, fitted by
-``scripts/learn_confidence.py`` on labelled answers of the calibration buildings and checked on
+The model (``config/confidence.py``) is a score of the features below -- boosted regression trees
+for global answers, a logistic regression for tracked ones -- mapped to a probability by an
+isotonic map, fitted by ``scripts/learn_confidence.py`` on labelled answers of the calibration buildings and checked on
 buildings it never saw (``bench localize`` prints the reliability of its probabilities and
 draws the diagram). A status of ``ok`` needs at least ``LocalizerConfig.min_confidence``. The
 tracker's poses have a model of their own (``TRACK_CONFIDENCE_MODEL``): the same evidence plus
@@ -43,6 +44,9 @@ def feature_values(ev: Evidence) -> dict[str, float]:
         'log_returns': math.log(max(ev.returns, 1)),
         'log_scan_length': math.log(max(ev.scan_length, 0.5)),
         'log_extent': math.log(max(ev.extent, 0.1)),
+        'close_rivals': float(ev.close_rivals),
+        'near_rivals': float(ev.near_rivals),
+        'return_fraction': ev.return_fraction,
         'log_prior_distance': math.log1p(ev.prior_distance),      # NaN for a global answer
         'log_scan_position_std': math.log(max(ev.scan_position_std, 1e-3)),
     }

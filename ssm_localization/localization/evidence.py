@@ -8,9 +8,11 @@ A pose is trusted for what the scan and the map say about it, not for how it was
 - how the endpoints lie on the wall surface: on it, in unknown cells, and how much of the scan's
   length lies in unexplained stretches longer than a metre (an unmapped *wall*, which clutter --
   people, chairs -- seldom makes);
-- how well the pose is determined (its covariance) and how far ahead of the best distinct rival
-  place it is (the margin of their scores);
-- how much there is of it (returns among the checked beams);
+- how well the pose is determined (its covariance), how far ahead of the best distinct rival
+  place it is (the margin of their scores) and how many distinct places score nearly as well
+  (a scan that fits many places tells little about any one of them);
+- how much there is of it (returns among the checked beams, and the share of the scan's beams
+  that returned at all: a short laser in a large hall returns few);
 - for a tracked pose, how far the scan's own pose lies from the motion prediction.
 ``confidence.py`` turns these into a calibrated probability that the pose is right.
 """
@@ -34,6 +36,9 @@ UNEXPLAINED = 0.15
 LINK = 0.5
 #: unexplained stretches longer than this count as unmapped structure, metres
 LONG_RUN = 1.0
+#: distinct rivals scoring within these of the answer's score are counted (close, near)
+CLOSE_RIVAL = 0.05
+NEAR_RIVAL = 0.1
 
 
 @dataclass(frozen=True)
@@ -54,6 +59,9 @@ class Evidence:
     returns: int             # beams with a finite reading among those checked
     scan_length: float       # metres of surface the scan sees (gaps between linked endpoints)
     extent: float            # metres: 90th percentile of the range of its spatially even points
+    close_rivals: int = 0    # distinct verified poses scoring within CLOSE_RIVAL of this one
+    near_rivals: int = 0     # ... within NEAR_RIVAL
+    return_fraction: float = 1.0   # of the scan's beams: a return (finite, within range)
     prior_distance: float = math.nan   # tracked poses: the scan's own pose from the motion
     #                                    prediction, in standard deviations (Mahalanobis)
     scan_position_std: float = math.nan  # the scan's own pose, before a tracker fuses in the
@@ -107,6 +115,20 @@ def unexplained_runs(points: np.ndarray, off: np.ndarray, link: float = LINK,
     cum = np.concatenate(([0.0], np.cumsum(np.where(step, gaps, 0.0))))
     lengths = cum[ends] - cum[starts]
     return float(lengths[lengths > long_run].sum() / total), total
+
+
+def rival_counts(score: float, rivals) -> tuple[float, int, int]:
+    """
+    Return ``(margin, close, near)`` of a pose scoring ``score`` against its distinct rivals.
+
+    ``rivals`` the scores of the distinct places verified for the same scan; ``margin`` is the
+    lead over the best of them (``score`` itself when there is none), ``close`` / ``near`` how
+    many score within :data:`CLOSE_RIVAL` / :data:`NEAR_RIVAL` of it.
+    """
+    rivals = [float(r) for r in rivals]
+    margin = score - max(rivals, default=0.0)
+    return (margin, sum(r >= score - CLOSE_RIVAL for r in rivals),
+            sum(r >= score - NEAR_RIVAL for r in rivals))
 
 
 def beam_fractions(check: BeamCheck) -> tuple[float, float, float]:

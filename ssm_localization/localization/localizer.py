@@ -43,7 +43,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .confidence import confidence
-from .evidence import beam_fractions, covariance_stds, endpoint_evidence, Evidence
+from .evidence import (beam_fractions, covariance_stds, endpoint_evidence, Evidence,
+                       rival_counts)
 from .fusion import lever_arm_covariance
 from .map_layers import build_map_layers
 from .refine import refine_poses
@@ -643,10 +644,10 @@ class GlobalLocalizer:
                          key=lambda h: (h.contradicting > limit, -h.score))
         if not checked:
             return self._failed(clock, 'no verified hypothesis')
-        rival, hyps = self.best_rival(query, checked[0], hyps)
+        rivals, hyps = self.rivals(query, checked[0], hyps)
         best = self.polish(query, checked[0])
         ranked = [best] + checked[1:]
-        evidence = self.evidence(query, best, rival)
+        evidence = self.evidence(query, best, rivals)
         status, message, cov, conf = verdict(ranked, cfg, evidence, self.confidence_model)
         clock.lap('decide')
         return Localization(status=status, pose=best.pose, covariance=cov, node=best.node,
@@ -656,27 +657,27 @@ class GlobalLocalizer:
                                                  and all(h is not c for c in checked)]
                             + [h for h in hyps if h.check is None] + list(others))
 
-    def best_rival(self, query: Query, best: Hypothesis,
-                   hyps: list[Hypothesis]) -> tuple[float, list[Hypothesis]]:
+    def rivals(self, query: Query, best: Hypothesis,
+               hyps: list[Hypothesis]) -> tuple[list[float], list[Hypothesis]]:
         """
-        Return the score of the best place distinct from ``best`` and ``hyps`` with it verified.
+        Return the scores of the verified places distinct from ``best`` and ``hyps``.
 
-        The score is 0 when there is none. The refined hypothesis distinct from ``best`` that
-        explains most of the scan is verified if it was not yet, so the margin of the answer
+        The refined hypothesis distinct from ``best`` that explains most of the scan is verified
+        if it was not yet (and so returned in ``hyps``), so the margin of the answer
         (``evidence.py``) is always measured against a ray-cast rival.
         """
         cfg = self.config
         others = [k for k, h in enumerate(hyps) if h is not best and h.refined
                   and distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)]
         if not others:
-            return 0.0, hyps
+            return [], hyps
         top = max(others, key=lambda k: hyps[k].explained)
         if hyps[top].check is None:
             hyps = hyps[:top] + self.verify(query, [hyps[top]]) + hyps[top + 1:]
-        return max(hyps[k].score for k in others if hyps[k].check is not None), hyps
+        return [hyps[k].score for k in others if hyps[k].check is not None], hyps
 
-    def evidence(self, query: Query, h: Hypothesis, rival: float) -> Evidence:
-        """Return the evidence for the verified ``h``; its best distinct rival scores ``rival``."""
+    def evidence(self, query: Query, h: Hypothesis, rivals=()) -> Evidence:
+        """Return the evidence for the verified ``h``; ``rivals``: its distinct rivals' scores."""
         check = h.check
         if check is None:
             raise ValueError('evidence needs a verified hypothesis (ray-cast beam check)')
@@ -686,11 +687,15 @@ class GlobalLocalizer:
         position_std, yaw_std = covariance_stds(h.covariance)
         even = query.features.points
         extent = float(np.percentile(np.hypot(even[:, 0], even[:, 1]), 90)) if len(even) else 0.0
+        margin, close, near = rival_counts(h.score, rivals)
         return Evidence(hit=hit, through=through, short=short,
                         missing=check.missing / max(check.beams, 1), on_wall=on_wall,
                         unknown=unknown, unexplained_runs=runs, explained=h.explained,
-                        margin=h.score - rival, position_std=position_std, yaw_std=yaw_std,
+                        margin=margin, position_std=position_std, yaw_std=yaw_std,
                         returns=check.returns, scan_length=length, extent=extent,
+                        close_rivals=close, near_rivals=near,
+                        return_fraction=float(np.mean(np.isfinite(query.beams)))
+                        if len(query.beams) else 0.0,
                         scan_position_std=position_std)
 
     def report_covariance(self, cov_laser: np.ndarray, laser_pose: Pose2) -> np.ndarray:

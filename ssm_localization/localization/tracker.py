@@ -294,7 +294,7 @@ class Tracker:
         # part: the fused covariance; rivals: the distinct poses verified in the window)
         others = [h.score for h in verified if h is not best
                   and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)]
-        evidence = loc.evidence(query, fused, max(others, default=0.0))
+        evidence = loc.evidence(query, fused, others)
         stds = covariance_stds(cov)
         evidence = replace(evidence, position_std=stds[0], yaw_std=stds[1],
                            prior_distance=math.sqrt(best_m2))

@@ -2,24 +2,26 @@
 The evidence of an answer and its calibrated confidence (localization/evidence.py, confidence.py).
 
 The features on hand-built scans, the beam counts, the fit and the reliability bins, the model
-shipped against the file it was copied from, and the verdicts a right pose, a wrong one and a
+shipped against the files they were written to, and the verdicts a right pose, a wrong one and a
 scan of another building must get.
 """
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 from helpers import BAGS, REPO
 import numpy as np
 import pytest
 from ssm_localization import build_index, GlobalLocalizer, read_bag
-from ssm_localization.config.confidence import (CONFIDENCE_MODEL, ConfidenceModel,
+from ssm_localization.config.confidence import (CONFIDENCE_MODEL, ConfidenceModel, load_model,
                                                 TRACK_CONFIDENCE_MODEL)
-from ssm_localization.evaluation.calibration import fit_confidence, isotonic_knots, reliability
+from ssm_localization.evaluation.calibration import (BOOSTING, fit_confidence, isotonic_knots,
+                                                     reliability, tree_values)
 from ssm_localization.files.yaml_input import load_yaml_file
 from ssm_localization.localization.confidence import feature_values, within_right
-from ssm_localization.localization.evidence import Evidence, unexplained_runs
+from ssm_localization.localization.evidence import Evidence, rival_counts, unexplained_runs
 from ssm_localization.localization.verify import check_beams
 from ssm_localization.mapping.map_io import OccupancyMap
 
@@ -151,23 +153,68 @@ def test_model_needs_consistent_fields():
         ConfidenceModel(('a',), (0.0,), (1.0,), (1.0,), 0.0, refused={'rival': 2.0})
 
 
-@pytest.mark.parametrize('model, path', [
-    (CONFIDENCE_MODEL, 'confidence_model.yaml'),
-    (TRACK_CONFIDENCE_MODEL, 'track_confidence_model.yaml'),
-])
-def test_the_shipped_models_are_the_calibrated_ones(model, path):
-    """The models are config/*confidence_model.yaml, written by scripts/learn_confidence.py."""
-    doc = load_yaml_file(REPO / 'config' / path, 'confidence model')
-    fitted = doc['model']
-    shipped = dataclasses.asdict(model)
-    assert list(fitted['features']) == list(shipped['features'])
-    for key in ('mean', 'scale', 'weights'):
-        assert fitted[key] == pytest.approx(list(shipped[key]), rel=1e-9)
-    assert fitted['intercept'] == pytest.approx(shipped['intercept'], rel=1e-9)
-    assert fitted['refused'] == shipped['refused']
-    assert np.array(fitted['calibration']) == pytest.approx(np.array(shipped['calibration']),
-                                                            rel=1e-9)
-    assert 'calibration' in fitted['split']
+def test_the_tracker_model_is_the_calibrated_one():
+    """The tracker's model is config/track_confidence_model.yaml, by learn_confidence --tracker."""
+    doc = load_yaml_file(REPO / 'config' / 'track_confidence_model.yaml', 'confidence model')
+    fitted = ConfidenceModel.from_dict(doc['model'])
+    assert fitted.features == TRACK_CONFIDENCE_MODEL.features
+    for key in ('mean', 'scale', 'weights', 'calibration'):
+        assert np.array(getattr(fitted, key)) == pytest.approx(
+            np.array(getattr(TRACK_CONFIDENCE_MODEL, key)), rel=1e-9)
+    assert fitted.intercept == pytest.approx(TRACK_CONFIDENCE_MODEL.intercept, rel=1e-9)
+    assert fitted.refused == TRACK_CONFIDENCE_MODEL.refused and not fitted.trees
+
+
+def test_the_global_model_is_package_data_of_boosted_trees():
+    """CONFIDENCE_MODEL is confidence_model.json beside config/confidence.py, installed with it."""
+    path = REPO / 'ssm_localization' / 'config' / 'confidence_model.json'
+    assert load_model(path) == CONFIDENCE_MODEL
+    assert CONFIDENCE_MODEL.trees and CONFIDENCE_MODEL.weights      # a regression and trees
+    assert 'calibration' in CONFIDENCE_MODEL.split
+    assert "package_data={'ssm_localization.config': ['*.json']}" in (REPO / 'setup.py').read_text()
+    # every feature the trees split on is one feature_values makes
+    made = feature_values(_evidence())
+    assert {CONFIDENCE_MODEL.features[n[0]] for t in CONFIDENCE_MODEL.trees for n in t
+            if n[0] >= 0} <= set(made)
+
+
+def test_trees_are_evaluated_as_written():
+    tree = ((0, 0.5, 1, 2, 0.0), (-1, 0.0, -1, -1, -1.0), (1, 2.0, 3, 4, 0.0),
+            (-1, 0.0, -1, -1, 0.5), (-1, 0.0, -1, -1, 2.0))
+    model = ConfidenceModel(('a', 'b'), (), (), (), 0.25, trees=(tree, tree))
+    assert model.logit({'a': 0.5, 'b': 9.0}) == pytest.approx(0.25 - 2.0)      # a <= 0.5: left
+    assert model.logit({'a': 0.6, 'b': 2.0}) == pytest.approx(0.25 + 1.0)
+    assert model.logit({'a': 0.6, 'b': 2.1}) == pytest.approx(0.25 + 4.0)
+    assert tree_values(tree, np.array([[0.5, 9.0], [0.6, 2.0], [0.6, 2.1]])) == \
+        pytest.approx([-1.0, 0.5, 2.0])
+    doc = json.loads(json.dumps(dataclasses.asdict(model)))
+    assert ConfidenceModel.from_dict(doc) == model
+    for bad in (((0, 0.5, 0, 2, 0.0), (-1, 0.0, -1, -1, 1.0)),      # a child before its parent
+                ((5, 0.5, 1, 1, 0.0), (-1, 0.0, -1, -1, 1.0)),      # no feature 5
+                ((-1, 0.0, -1, -1, math.nan),)):
+        with pytest.raises(ValueError, match='tree|finite'):
+            ConfidenceModel(('a', 'b'), (), (), (), 0.0, trees=(bad,))
+
+
+def test_boosted_trees_weigh_one_feature_by_another():
+    """Right when two features agree in sign: no linear score can tell, boosted trees can."""
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-1.0, 1.0, (2000, 2))
+    right = x[:, 0] * x[:, 1] > 0
+    values = [{'a': a, 'b': b} for a, b in x]
+    groups = [f'building {k % 3}' for k in range(len(x))]
+    boosted = fit_confidence(values, right, ('a', 'b'), groups, boosted=BOOSTING)
+    linear = fit_confidence(values, right, ('a', 'b'), groups)
+    for model, least, most in ((boosted, 0.95, 1.0), (linear, 0.0, 0.6)):
+        p = np.array([model.probability(v) for v in values])
+        assert least <= np.mean((p >= 0.5) == right) <= most
+    assert boosted.trees and not linear.trees
+
+
+def test_rivals_are_counted_by_their_lead():
+    assert rival_counts(0.8, []) == (pytest.approx(0.8), 0, 0)
+    assert rival_counts(0.8, [0.77, 0.72, 0.5]) == (pytest.approx(0.03), 1, 2)
+    assert rival_counts(0.8, [0.9]) == (pytest.approx(-0.1), 1, 1)
 
 
 # --------------------------------------------------------------------------- verdicts
@@ -204,7 +251,7 @@ def test_a_wrong_pose_has_the_evidence_against_it(depot):
                                 check=None)
     wrong = loc.verify(query, [moved])[0]
     assert moved.check is None and wrong.check is not None        # a value: verify returns it
-    ev = loc.evidence(query, wrong, rival=best.score)
+    ev = loc.evidence(query, wrong, rivals=[best.score])
     p = CONFIDENCE_MODEL.probability(feature_values(ev))
     assert ev.margin < 0 and ev.hit < 0.5 and ev.through > 0.2
     assert p < 0.5 < right.confidence
