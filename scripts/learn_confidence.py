@@ -12,11 +12,13 @@ the TurtleBot3 maps are the validation split, never looked at here:
   at 3.5 m and at 120 deg; never right.
 Every answer comes from the localizer with ``min_confidence`` 0, so that its status says whether
 the rules alone accept the pose. The model is fitted on the answers the rules accept (those are
-the ones it decides): boosted regression trees on the evidence (``calibration.BOOSTING``; a
-score that can weigh one piece of evidence by another, which a logistic regression cannot),
-then an isotonic map of the score to a probability, fitted on scores cross-fitted by building (each building scored by a regression
-that did not see it). Foreign answers are weighted to make up ``--foreign-share`` of all answers
-(28 %: the share in ``bench localize --sensors ... --foreign``'s protocol), so the probabilities
+the ones it decides): a logistic regression of the evidence and boosted regression trees grown
+from its score (``calibration.BOOSTING``, monotone in the evidence of ``MONOTONE``: a score that
+can weigh one piece of evidence by another, which a regression alone cannot), then an isotonic
+map of the score to a probability, fitted on scores cross-fitted by building (each building
+scored by a model that did not see it). Foreign answers are weighted to make up
+``--foreign-share`` of all answers (28 %: the share in ``bench localize --sensors ...
+--foreign``'s protocol), so the probabilities
 are calibrated for that mix. An answer the rules refuse reports the rate at which such answers
 were right here (same weights), by reason. Prints the fit, a table of thresholds (precision of
 the own answers, ``ok`` rate of the foreign ones) and the reliability of the fitted

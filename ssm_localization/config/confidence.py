@@ -125,8 +125,12 @@ class ConfidenceModel:
 
 
 def _check_tree(tree, features: int) -> None:
-    """Raise ``ValueError`` unless ``tree`` is a tree of ``(feature, threshold, left, right,
-    value)`` nodes whose splits name one of ``features`` inputs and lead to later nodes."""
+    """
+    Raise ``ValueError`` unless ``tree`` is a tree of ``(feature, threshold, ...)`` nodes.
+
+    Each node is ``(feature, threshold, left, right, value)``; a split names one of the
+    ``features`` inputs and leads to later nodes.
+    """
     ok = len(tree) > 0
     for k, node in enumerate(tree):
         if len(node) != 5:

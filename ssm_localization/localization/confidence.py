@@ -1,11 +1,12 @@
 """
 ``P(right | evidence)``: the calibrated confidence reported with every answer (beyond the paper).
 
-The model (``config/confidence.py``) is a score of the features below -- boosted regression trees
-for global answers, a logistic regression for tracked ones -- mapped to a probability by an
-isotonic map, fitted by ``scripts/learn_confidence.py`` on labelled answers of the calibration buildings and checked on
-buildings it never saw (``bench localize`` prints the reliability of its probabilities and
-draws the diagram). A status of ``ok`` needs at least ``LocalizerConfig.min_confidence``. The
+The model (``config/confidence.py``) is a score of the features below -- a logistic regression
+plus boosted regression trees for global answers, a logistic regression for tracked ones --
+mapped to a probability by an isotonic map, fitted by ``scripts/learn_confidence.py`` on
+labelled answers of the calibration buildings and checked on buildings it never saw (``bench
+localize`` prints the reliability of its probabilities and draws the diagram). A status of
+``ok`` needs at least ``LocalizerConfig.min_confidence``. The
 tracker's poses have a model of their own (``TRACK_CONFIDENCE_MODEL``): the same evidence plus
 how far the scan's own pose lies from the motion prediction, fitted on tracked answers.
 """

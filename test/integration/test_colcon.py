@@ -59,6 +59,8 @@ def test_colcon_build_installs_nodes_and_ament_index(tmp_path):
     # the installed entry point resolves and runs (a bad parameter makes it exit at once)
     pytest.importorskip('rclpy', reason='rclpy is needed to run the installed node')
     site = next((prefix / 'lib').glob('python3*/site-packages'))
+    # package data: the confidence model the localizer loads at import
+    assert (site / PKG / 'config' / 'confidence_model.json').is_file()
     # the launch files' helper module comes with the installed package
     helper = subprocess.run([sys.executable, '-c', 'import ssm_localization.ros.launch_support '
                              'as m; print(m.__file__)'], env=dict(env, PYTHONPATH=str(site)),

@@ -171,7 +171,8 @@ def test_the_global_model_is_package_data_of_boosted_trees():
     assert load_model(path) == CONFIDENCE_MODEL
     assert CONFIDENCE_MODEL.trees and CONFIDENCE_MODEL.weights      # a regression and trees
     assert 'calibration' in CONFIDENCE_MODEL.split
-    assert "package_data={'ssm_localization.config': ['*.json']}" in (REPO / 'setup.py').read_text()
+    setup = (REPO / 'setup.py').read_text()
+    assert "package_data={'ssm_localization.config': ['*.json']}" in setup
     # every feature the trees split on is one feature_values makes
     made = feature_values(_evidence())
     assert {CONFIDENCE_MODEL.features[n[0]] for t in CONFIDENCE_MODEL.trees for n in t
