@@ -125,7 +125,7 @@ class _Grower:
         k = len(nodes)
         big_g, big_h, weight = float(g[idx].sum()), float(h[idx].sum()), float(self.sw[idx].sum())
         nodes.append((-1, 0.0, -1, -1,
-                      self.rate * min(max(-big_g / (big_h + self.l2), low), high)))
+                      float(self.rate * min(max(-big_g / (big_h + self.l2), low), high))))
         if depth == 0 or weight < 2.0 * self.min_leaf:
             return k
         parent, best, where = big_g * big_g / (big_h + self.l2), 1e-9, None
@@ -151,7 +151,7 @@ class _Grower:
         go_left = self.codes[idx, j] <= b
         lo_kids, hi_kids = (low, high), (low, high)
         if self.direction[j]:
-            values = [min(max(-g[part].sum() / (h[part].sum() + self.l2), low), high)
+            values = [float(min(max(-g[part].sum() / (h[part].sum() + self.l2), low), high))
                       for part in (idx[go_left], idx[~go_left])]
             mid = 0.5 * (values[0] + values[1])
             if self.direction[j] > 0:        # the left subtree stays below the right one
