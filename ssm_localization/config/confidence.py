@@ -5,8 +5,8 @@ A score weighs the evidence of an answer (its log-odds of being right); an isoto
 piecewise-linear) map, fitted on scores of buildings the score's fit did not see, turns it into a
 probability. ``scripts/learn_confidence.py`` fits both on labelled answers of the calibration
 split (right poses, wrong places in the same building, scans of other buildings). The global
-answers' score (:data:`CONFIDENCE_MODEL`) is boosted regression trees, kept as package data in
-``confidence_model.json`` beside this module; the tracker's (:data:`TRACK_CONFIDENCE_MODEL`) is a
+answers' score (:data:`CONFIDENCE_MODEL`) is a logistic regression plus boosted regression trees
+grown from it, kept as package data in ``confidence_model.json`` beside this module; the tracker's (:data:`TRACK_CONFIDENCE_MODEL`) is a
 logistic regression, copied here from ``config/track_confidence_model.yaml`` (a test checks they
 agree). The paper itself learns its pairwise potentials by logistic regression (section II.B);
 here the same loss weighs the evidence of a whole answer.
