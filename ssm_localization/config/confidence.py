@@ -8,8 +8,9 @@ split (right poses, wrong places in the same building, scans of other buildings)
 answers' score (:data:`CONFIDENCE_MODEL`) is a logistic regression plus boosted regression trees
 grown from it, kept as package data in ``confidence_model.json`` beside this module; the
 tracker's (:data:`TRACK_CONFIDENCE_MODEL`) is a logistic regression, copied here from
-``config/track_confidence_model.yaml`` (a test checks they agree). The paper itself learns its pairwise potentials by logistic regression (section II.B);
-here the same loss weighs the evidence of a whole answer.
+``config/track_confidence_model.yaml`` (a test checks they agree). The paper itself learns its
+pairwise potentials by logistic regression (section II.B); here the same loss weighs the
+evidence of a whole answer.
 """
 from __future__ import annotations
 
