@@ -135,9 +135,31 @@ def test_bad_parameters_at_run_time_are_refused_and_the_node_keeps_serving(ros):
 
 # ---------------------------------------------------------------------------- item 2
 
+def _answered_once(rig, client, scan, tries: int = 3) -> None:
+    """
+    Have one call of a new ``client`` answered, scans flowing, before it joins a burst.
+
+    ``wait_for_service`` waits for the request side only; rmw_fastrtps drops an answer whose
+    client has not matched on the response side within 100 ms (a RuntimeWarning in the node's
+    process), so a burst fired at a client created a moment before can lose answers the node
+    did send: a race of DDS discovery, not of the node's queue, which is what is tested here.
+    """
+    for _ in range(tries):
+        future = client.call_async(Trigger.Request())
+        t0 = time.monotonic()
+        while not future.done() and time.monotonic() - t0 < 5.0:
+            rig.scan_pub.publish(scan)
+            time.sleep(0.05)
+        if future.done():
+            assert future.result().success, future.result().message
+            return
+    raise AssertionError(f'a new client got no answer in {tries} tries')
+
+
 def test_bursts_from_several_clients_all_answered_with_bounded_queue(ros):
     occ = synthetic_map(0)
     sim = _sim(occ, count=1)
+    scan = laser_scan_from_record(sim.scans[0])
     rig = Rig(ros, scan_timeout=10.0)
     rig.map_pub.publish(occupancy_grid_from_map(occ))
     assert rig.ready()
@@ -146,6 +168,8 @@ def test_bursts_from_several_clients_all_answered_with_bounded_queue(ros):
                for _ in range(4)]
     for c in clients:
         assert c.wait_for_service(timeout_sec=10.0)
+        _answered_once(rig, c, scan)
+    time.sleep(0.5)                     # the last scans delivered: the burst waits for a new one
     total = MAX_QUEUED_CALLS + 40
     futures = [clients[i % 4].call_async(Trigger.Request()) for i in range(total)]
     # no scan yet: the queue fills up, the rest is refused at once with the reason
@@ -156,7 +180,6 @@ def test_bursts_from_several_clients_all_answered_with_bounded_queue(ros):
     assert all(not f.result().success and f.result().message.startswith('busy') for f in done)
     # one scan answers every waiting call (one localization)
     t0 = time.monotonic()
-    scan = laser_scan_from_record(sim.scans[0])
     while not all(f.done() for f in futures) and time.monotonic() - t0 < 20:
         rig.scan_pub.publish(scan)
         time.sleep(0.05)
@@ -165,11 +188,19 @@ def test_bursts_from_several_clients_all_answered_with_bounded_queue(ros):
     assert len(ok) == MAX_QUEUED_CALLS and len({r.message for r in ok}) == 1
     assert time.monotonic() - t0 < 10.0
 
-    # default-QoS clients with up to 10 calls each in flight, scans flowing: all answered ok
+    # default-QoS clients (KEEP_LAST 10), several calls each in flight, scans flowing: all
+    # answered ok. Every client's response reader receives the answers to every client
+    # (rmw_fastrtps sorts them out on the reader's side); the node paces the answers of one
+    # scan (8 every 20 ms), but a burst of more than 10 answers can still overwrite a default
+    # client's own before it takes them, on a loaded machine (measured: 1-5 of 24-30 answers
+    # lost in about one run in three with both cores busy, every callback having returned its
+    # answer). So 9 calls in all here; a client that keeps more in flight sizes its queue, as
+    # the deep ones above do.
     plain = [ros.node.create_client(Trigger, 'relocalize') for _ in range(3)]
     for c in plain:
         assert c.wait_for_service(timeout_sec=10.0)
-    futures = [plain[i % 3].call_async(Trigger.Request()) for i in range(30)]
+        _answered_once(rig, c, scan)
+    futures = [plain[i % 3].call_async(Trigger.Request()) for i in range(9)]
     t0 = time.monotonic()
     while not all(f.done() for f in futures) and time.monotonic() - t0 < 20:
         rig.scan_pub.publish(scan)
