@@ -79,14 +79,14 @@ import yaml  # noqa: E402, I100
 CALIBRATION = ('intel', 'aces', 'fhw', 'depot', 'empty_room')
 TRACK_LOGS = ('intel', 'aces', 'fhw')
 TRACK_SENSORS = ('full', 'range3.5', 'fov120')
-#: 'hit' is left out (hit + through + short = 1 over the returns)
-LINEAR_FEATURES = ('through', 'short', 'missing', 'on_wall', 'unknown', 'unexplained_runs',
+#: the evidence both models weigh; 'hit' is left out (hit + through + short = 1 over the returns)
+SHARED_FEATURES = ('through', 'short', 'missing', 'on_wall', 'unknown', 'unexplained_runs',
                    'explained', 'margin', 'log_position_std', 'log_yaw_std', 'log_scan_length',
                    'log_extent')
 #: the global model's: how many distinct places score nearly as well, how much of the scan
 #: returned at all, and how many returns were checked
-FEATURES = LINEAR_FEATURES + ('close_rivals', 'near_rivals', 'return_fraction', 'log_returns')
-TRACK_FEATURES = LINEAR_FEATURES + ('log_prior_distance', 'log_scan_position_std')
+FEATURES = SHARED_FEATURES + ('close_rivals', 'near_rivals', 'return_fraction', 'log_returns')
+TRACK_FEATURES = SHARED_FEATURES + ('log_prior_distance', 'log_scan_position_std')
 #: the direction in which each feature may move the global model's score (+1 up, -1 down; left
 #: out: free): worse evidence never earns more trust, also far outside the calibration data
 #: (``short`` is clutter in front of a right pose's walls as often as a wrong pose's; how much

@@ -54,14 +54,15 @@ def fit_logistic(x: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None,
 BOOSTING = {'rounds': 150, 'rate': 0.1, 'depth': 2, 'min_leaf': 40.0, 'l2': 1.0, 'bins': 32}
 
 
-def fit_boosted(x: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None,
-                rounds: int = 150, rate: float = 0.1, depth: int = 2, min_leaf: float = 40.0,
-                l2: float = 1.0, bins: int = 32,
-                monotone: Sequence[int] | None = None,
-                start: np.ndarray | None = None) -> tuple[float, tuple]:
+def fit_boosted(x: np.ndarray, y: np.ndarray, start: np.ndarray,
+                weight: np.ndarray | None = None, rounds: int = 150, rate: float = 0.1,
+                depth: int = 2, min_leaf: float = 40.0, l2: float = 1.0, bins: int = 32,
+                monotone: Sequence[int] | None = None) -> tuple:
     """
-    Return ``(intercept, trees)``: gradient-boosted regression trees on the logistic loss.
+    Return gradient-boosted regression trees on the logistic loss, grown from the score ``start``.
 
+    ``start`` is each answer's log-odds before the trees (a logistic regression's, in
+    :func:`fit_confidence`).
     Each round fits a tree of at most ``depth`` splits to the loss's gradient with Newton leaf
     values ``-G / (H + l2)`` (second-order boosting), scaled by ``rate``. Splits are searched at
     ``bins`` quantiles of each feature; a leaf holds at least ``min_leaf`` of the sample weight
@@ -71,9 +72,8 @@ def fit_boosted(x: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None,
     never rises, 0: free): a split that would break it is not taken, and the leaves below a
     split are bounded by the midpoint of its two values, so every tree, and their sum, keeps
     the directions everywhere, also far outside the data (worse evidence never earns more
-    trust). ``start``: a score to boost from (e.g. a logistic regression's log-odds; the
-    intercept is then 0). Trees are tuples of ``(feature, threshold, left, right, value)``
-    nodes (``ConfidenceModel.trees``).
+    trust). Trees are tuples of ``(feature, threshold, left, right, value)`` nodes
+    (``ConfidenceModel.trees``).
     """
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -83,22 +83,20 @@ def fit_boosted(x: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None,
     direction = np.zeros(x.shape[1], int) if monotone is None else np.asarray(monotone, int)
     if direction.shape != (x.shape[1],):
         raise ValueError(f'monotone: one direction per feature ({x.shape[1]})')
-    p0 = float(np.clip(np.sum(sw * y) / np.sum(sw), 1e-6, 1.0 - 1e-6))
-    intercept = math.log(p0 / (1.0 - p0)) if start is None else 0.0
     cuts = [np.unique(np.quantile(x[:, j], np.linspace(0.0, 1.0, bins + 1)[1:-1]))
             for j in range(x.shape[1])]
     # code k <=> x <= cuts[k] (and above cuts[k - 1])
     codes = np.column_stack([np.searchsorted(c, x[:, j], side='left')
                              for j, c in enumerate(cuts)])
     grow = _Grower(codes, cuts, direction, sw, depth, min_leaf, l2, rate)
-    score = np.full(len(y), intercept) if start is None else np.asarray(start, float).copy()
+    score = np.array(start, dtype=float)
     trees = []
     for _ in range(rounds):
         p = 1.0 / (1.0 + np.exp(-score))
         tree = grow.tree(sw * (p - y), sw * p * (1.0 - p))
         trees.append(tree)
         score += tree_values(tree, x)
-    return intercept, tuple(trees)
+    return tuple(trees)
 
 
 @dataclass
@@ -129,6 +127,7 @@ class _Grower:
         if depth == 0 or weight < 2.0 * self.min_leaf:
             return k
         parent, best, where = big_g * big_g / (big_h + self.l2), 1e-9, None
+        # (feature, bin, left value, right value) of the best split
         for j, c in enumerate(self.cuts):
             if len(c) == 0:
                 continue
@@ -139,21 +138,19 @@ class _Grower:
             gr, hr = big_g - gl, big_h - hl
             gain = gl ** 2 / (hl + self.l2) + gr ** 2 / (hr + self.l2) - parent
             gain[(wl < self.min_leaf) | (weight - wl < self.min_leaf)] = -np.inf
+            left, right = -gl / (hl + self.l2), -gr / (hr + self.l2)
             if self.direction[j]:
-                left, right = -gl / (hl + self.l2), -gr / (hr + self.l2)
                 gain[self.direction[j] * (right - left) < 0.0] = -np.inf
             b = int(np.argmax(gain))
             if gain[b] > best:
-                best, where = float(gain[b]), (j, b)
+                best, where = float(gain[b]), (j, b, float(left[b]), float(right[b]))
         if where is None:
             return k
-        j, b = where
+        j, b, left_value, right_value = where
         go_left = self.codes[idx, j] <= b
         lo_kids, hi_kids = (low, high), (low, high)
         if self.direction[j]:
-            values = [float(min(max(-g[part].sum() / (h[part].sum() + self.l2), low), high))
-                      for part in (idx[go_left], idx[~go_left])]
-            mid = 0.5 * (values[0] + values[1])
+            mid = 0.5 * (min(max(left_value, low), high) + min(max(right_value, low), high))
             if self.direction[j] > 0:        # the left subtree stays below the right one
                 lo_kids, hi_kids = (low, mid), (mid, high)
             else:
@@ -228,12 +225,11 @@ def fit_confidence(values: Sequence[dict[str, float]], right: Sequence[bool],
     The score is a logistic regression (L2 ``l2``), with ``boosted`` (the keywords of
     :func:`fit_boosted`, e.g. :data:`BOOSTING`) plus boosted regression trees grown from it
     (the regression carries the evidence beyond the data, the trees how one piece of it weighs
-    another). ``values`` the
-    feature values of each answer (``confidence.feature_values``), ``right`` its label,
-    ``groups`` the building it comes from, ``weight`` its weight. The score is fitted on every
-    answer; the isotonic map on *cross-fitted* scores -- each building's answers scored by a
-    model fitted without that building -- so the probabilities are those of a building the
-    model has not seen.
+    another). ``values`` the feature values of each answer (``confidence.feature_values``),
+    ``right`` its label, ``groups`` the building it comes from, ``weight`` its weight. The
+    score is fitted on every answer; the isotonic map on *cross-fitted* scores -- each
+    building's answers scored by a model fitted without that building -- so the probabilities
+    are those of a building the model has not seen.
     """
     x = np.array([[v[f] for f in features] for v in values], dtype=float)
     y = np.asarray(right, dtype=float)
@@ -244,8 +240,8 @@ def fit_confidence(values: Sequence[dict[str, float]], right: Sequence[bool],
         mean, scale, w, b = fit_logistic(x[rows], y[rows], sw[rows], l2)
         trees = ()
         if boosted is not None:
-            _, trees = fit_boosted(x[rows], y[rows], sw[rows], **boosted,
-                                   start=b + ((x[rows] - mean) / scale) @ w)
+            trees = fit_boosted(x[rows], y[rows], b + ((x[rows] - mean) / scale) @ w,
+                                sw[rows], **boosted)
         return (lambda z: b + ((z - mean) / scale) @ w
                 + sum((tree_values(t, z) for t in trees), np.zeros(len(z)))), \
             (mean, scale, w, b, trees)
