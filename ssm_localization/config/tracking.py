@@ -9,7 +9,7 @@ from .fields import check_numbers, param
 #: fields that must be > 0 (the rest must be >= 0); tuples are checked element by element
 _POSITIVE = {'min_step_std', 'no_odom_std', 'max_odom_step', 'window_sigmas', 'window_xy',
              'window_yaw', 'yaw_step', 'gate_chi2', 'weak_std', 'max_position_std', 'rival_chi2',
-             'rival_prior_chi2'}
+             'rival_prior_chi2', 'noise_scale_bounds', 'noise_window', 'noise_min_samples'}
 
 
 @dataclass(frozen=True)
@@ -34,6 +34,13 @@ class TrackerConfig:
     no_odom_std: tuple[float, float] = param(
         (1.0, math.radians(45.0)), 'std of the motion between two scans when there is no '
         'odometry (the pose is predicted to stay put), (metres, rad)')
+    noise_scale_bounds: tuple[float, float] = param(
+        (0.02, 4.0), "bounds of the scales of the odometry's noise (position, heading) that the "
+        'tracker learns from the steps between verified poses (localization/noise.py); (1, 1): '
+        'the alphas as given')
+    noise_window: int = param(50, 'last steps between verified poses the noise scales are '
+                                  'learnt from')
+    noise_min_samples: int = param(10, 'steps needed before the noise scales move from 1')
     max_odom_step: float = param(
         5.0, 'an odometry increment longer than this between two scans is a jump (reset or '
         'glitch): predicted as no odometry, m')
@@ -101,6 +108,12 @@ class TrackerConfig:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f'TrackerConfig.{name} must be in [0, 1], got '
                                  f'{getattr(self, name)!r}')
+        lo, hi = self.noise_scale_bounds
+        if not lo <= 1.0 <= hi or self.noise_min_samples > self.noise_window:
+            raise ValueError(f'TrackerConfig: noise_scale_bounds must be (lo, hi) with lo <= 1 <= '
+                             f'hi and noise_min_samples <= noise_window, got '
+                             f'{self.noise_scale_bounds!r}, {self.noise_min_samples}, '
+                             f'{self.noise_window}')
         for name in ('window_xy', 'window_yaw'):
             if getattr(self, name)[0] > getattr(self, name)[1]:
                 raise ValueError(f'TrackerConfig.{name} must be (min, max) with min <= max, got '

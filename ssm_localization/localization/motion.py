@@ -70,23 +70,35 @@ def motion_noise(inc: Increment, config: TrackerConfig) -> np.ndarray:
     return cov + np.diag([xy ** 2, xy ** 2, yaw ** 2])
 
 
-def predict(pose: Pose2, cov: np.ndarray, inc: Increment | None,
-            config: TrackerConfig) -> tuple[Pose2, np.ndarray]:
+def predict(pose: Pose2, cov: np.ndarray, inc: Increment | None, config: TrackerConfig,
+            noise_scale: float = 1.0) -> tuple[Pose2, np.ndarray]:
     """
     Move a pose (map frame) and its covariance by an odometry increment.
 
     ``inc`` None: no odometry; the pose stays and its covariance grows by ``no_odom_std``.
+    ``noise_scale`` multiplies the odometry's noise (``noise.py``: learnt from the scans).
+    """
+    new, carried, noise = predict_parts(pose, cov, inc, config)
+    return new, carried + noise_scale * noise
+
+
+def predict_parts(pose: Pose2, cov: np.ndarray, inc: Increment | None,
+                  config: TrackerConfig) -> tuple[Pose2, np.ndarray, np.ndarray]:
+    """
+    Return the prediction of :func:`predict` with its covariance in two parts.
+
+    ``(pose, carried, noise)``: the pose's own covariance carried over the increment (a lever
+    arm) and the odometry's noise rotated into the map frame (with no odometry: ``no_odom_std``
+    as the noise); the prediction's covariance is their sum.
     """
     cov = np.asarray(cov, float)
     if inc is None:
         xy, yaw = config.no_odom_std
-        return pose, cov + np.diag([xy ** 2, xy ** 2, yaw ** 2])
+        return pose, cov, np.diag([xy ** 2, xy ** 2, yaw ** 2])
     new = compose(pose, inc.delta)
     c, s = math.cos(pose[2]), math.sin(pose[2])
     dx, dy = inc.delta[0], inc.delta[1]
-    # the pose's covariance carried over the increment (a lever arm), and the increment's noise
-    # rotated into the map frame
     rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    out = (lever_arm_covariance(cov, (c * dx - s * dy, s * dx + c * dy))
-           + rot @ motion_noise(inc, config) @ rot.T)
-    return new, 0.5 * (out + out.T)
+    carried = lever_arm_covariance(cov, (c * dx - s * dy, s * dx + c * dy))
+    noise = rot @ motion_noise(inc, config) @ rot.T
+    return new, 0.5 * (carried + carried.T), 0.5 * (noise + noise.T)

@@ -56,7 +56,8 @@ from .evidence import covariance_stds, Evidence
 from .fusion import fuse_weak, lever_arm_covariance, mahalanobis2
 from .localizer import (AMBIGUOUS, distinct, FAILED, GlobalLocalizer, Hypothesis, Localization,
                         OK, position_std, Query, SparseScan, Status, STATUSES)
-from .motion import check_pose, Increment, predict
+from .motion import check_pose, Increment, predict_parts
+from .noise import NoiseScale
 from ..config.confidence import ConfidenceModel, TRACK_CONFIDENCE_MODEL
 from ..config.tracking import TrackerConfig
 from ..transforms import apply, Pose2, wrap_angle
@@ -119,6 +120,7 @@ class _Attempt:
     truncated: bool = False      # the prediction's uncertainty reached beyond the window
     confidence: float = 0.0      # P(right | evidence) of the tracked pose
     evidence: Evidence | None = None
+    scan_pose: Pose2 | None = None          # the scan's own pose, before the prediction is fused
 
 
 class Tracker:
@@ -143,6 +145,12 @@ class Tracker:
         self._recent: list[float] = []          # scores of the last ok answers
         self._confidence = 0.0                  # of the last pose a scan verified
         self.relocalizations = 0
+        # the odometry's noise scale, learnt from the steps between verified poses (noise.py)
+        self.noise = NoiseScale(window=self.config.noise_window,
+                                min_samples=self.config.noise_min_samples,
+                                bounds=self.config.noise_scale_bounds)
+        self._fresh = False                     # the belief is a pose the last scan verified
+        self._step: tuple | None = None         # (prediction, odometry noise) of this scan
 
     # -- state ----------------------------------------------------------------------------------
     @property
@@ -223,9 +231,14 @@ class Tracker:
                 inc, note = None, (f'odometry jumped {inc.trans:.1f} m: predicted without it; ')
         self._odom = odom
         pred = pred_cov = None
+        self._step = None
         if self._pose is not None:
-            pred, pred_cov = predict(self._pose, self._cov, inc, self.config)
+            pred, carried, noise = predict_parts(self._pose, self._cov, inc, self.config)
+            pred_cov = carried + (self.noise.apply(noise) if inc is not None else noise)
+            if self._fresh and inc is not None:
+                self._step = (pred, noise)
             self._pose, self._cov = pred, pred_cov
+        self._fresh = False
         try:
             query = scan if isinstance(scan, Query) else self.localizer.prepare_scan(
                 scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
@@ -301,7 +314,7 @@ class Tracker:
         conf = confidence(evidence, self.confidence_model)
         refused = min(conf, 0.5)        # the rules refuse: not more likely right than wrong
         common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated,
-                  'confidence': conf, 'evidence': evidence}
+                  'confidence': conf, 'evidence': evidence, 'scan_pose': best.pose}
         rivals = [h for h, m2 in contenders if h is not best
                   and m2 <= best_m2 + cfg.rival_prior_chi2
                   and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)
@@ -431,7 +444,7 @@ class Tracker:
                                 'disagree with the map at the prediction', **common)
         if odometry:                 # no update: the stamps' floor goes with the next scan
             xy, yaw = cfg.min_step_std
-            self._cov = pred_cov - np.diag([xy ** 2, xy ** 2, yaw ** 2])
+            self._cov = pred_cov - self.noise.apply(np.diag([xy ** 2, xy ** 2, yaw ** 2]))
         if check.beams == 0:         # no measurement at all (NaN, out of range): no evidence
             return self._result(t0, stamp, FAILED, pred, f'bad scan: {why}, and not one beam '
                                 'measured anything (NaN or outside [range_min, range_max])',
@@ -453,8 +466,11 @@ class Tracker:
         """
         self._misses = 0
         if attempt.status == OK:
+            if self._step is not None and attempt.scan_pose is not None:
+                self.noise.add(attempt.scan_pose, *self._step)
             self._pose, self._cov = attempt.pose, attempt.covariance
             self._confidence = attempt.confidence
+            self._fresh = True
             self._remember(attempt.score)
         return self._result(t0, stamp, attempt.status, attempt.pose, message,
                             covariance=attempt.covariance, score=attempt.score, predicted=pred,
@@ -466,6 +482,7 @@ class Tracker:
         """Make an ``ok`` global answer the belief: a relocalization."""
         self._pose, self._cov, self._misses = glob.pose, glob.covariance, 0
         self._confidence = glob.confidence
+        self._fresh = True
         self._recent.clear()
         self._remember(glob.score)
         self.relocalizations += 1

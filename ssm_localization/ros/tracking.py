@@ -41,6 +41,8 @@ class TrackSession:
         if old is not None and old.localizer is localizer:
             return old
         tracker = Tracker(localizer, self.config)
+        if old is not None:
+            tracker.noise = old.noise        # the same robot's odometry: what was learnt stays
         if old is not None and old.localizer.index is localizer.index and not old.lost:
             tracker.set_prior(old.pose, old.covariance)      # same map, another laser mount
             self._log('track: the laser mount changed; the track goes on from its last pose')

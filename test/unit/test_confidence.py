@@ -20,7 +20,7 @@ from ssm_localization.config.confidence import (CONFIDENCE_MODEL, ConfidenceMode
 from ssm_localization.evaluation.calibration import (BOOSTING, fit_confidence, isotonic_knots,
                                                      reliability, tree_values)
 from ssm_localization.files.yaml_input import load_yaml_file
-from ssm_localization.localization.confidence import feature_values, within_right
+from ssm_localization.localization.confidence import feature_values, within_circle, within_right
 from ssm_localization.localization.evidence import Evidence, rival_counts, unexplained_runs
 from ssm_localization.localization.verify import check_beams
 from ssm_localization.mapping.map_io import OccupancyMap
@@ -135,6 +135,19 @@ def test_within_right_is_the_gaussian_mass_inside_the_success_bounds():
         pytest.approx(0.6827, abs=1e-4)
     grown = [within_right(np.diag([s ** 2, s ** 2, (s / 5) ** 2])) for s in (0.05, 0.2, 0.5, 2.0)]
     assert grown == sorted(grown, reverse=True) and grown[-1] < 0.05
+
+
+def test_within_circle_is_exact_for_elongated_errors():
+    """The 2-D Gaussian's mass in the circle, against Monte Carlo, whatever its axis ratio."""
+    rng = np.random.default_rng(3)
+    for cov in (np.diag([0.01, 0.5]), np.array([[0.1, 0.08], [0.08, 0.1]]),
+                np.diag([1e-6, 1.0])):
+        e = rng.multivariate_normal([0.0, 0.0], cov, 200_000)
+        assert within_circle(cov, 0.5) == pytest.approx(np.mean(np.hypot(*e.T) <= 0.5),
+                                                        abs=0.004)
+    # a corridor's error (long along the axis) keeps more mass than the isotropic bound says
+    corridor = np.diag([0.3 ** 2, 0.02 ** 2, 1e-8])
+    assert within_right(corridor) > 1 - math.exp(-0.5 ** 2 / (2 * 0.3 ** 2)) + 0.05
 
 
 def test_reliability_bins():

@@ -21,7 +21,9 @@ from ssm_localization.evaluation.tracking import (detected_losses, odometry_at, 
 from ssm_localization.io.bag_records import ScanRecord
 from ssm_localization.io.sequences import kidnap_sequence, ScanSequence, splice_kidnaps
 from ssm_localization.localization.fusion import fuse_weak, mahalanobis2
-from ssm_localization.localization.motion import check_pose, Increment, predict
+from ssm_localization.localization.motion import (check_pose, Increment, motion_noise, predict,
+                                                  predict_parts)
+from ssm_localization.localization.noise import NoiseScale
 from ssm_localization.localization.tracker import Tracker
 from ssm_localization.transforms import compose, inverse
 
@@ -68,6 +70,24 @@ def test_a_straight_run_recovers_the_path(track_bag):
     errors = np.array([_error((r.x, r.y, r.yaw), truth[k]) for k, r in enumerate(rows)])
     assert np.median(errors[:, 0]) < 0.06 and np.max(errors[:, 0]) < 0.25
     assert np.median(errors[:, 1]) < math.radians(1.0)
+
+
+@pytest.mark.slow
+def test_the_tracker_learns_how_good_its_odometry_is(track_bag):
+    """
+    Intel's odometry turns worse than the default alphas say (as the benchmark's logs measure
+    against the ground truth): the heading scale the tracker learns is above 1, the position
+    scale near 1; with the bounds at (1, 1) nothing is learnt.
+    """
+    bag, odom, truth, kidnaps, loc = track_bag
+    n = kidnaps[0]
+    tracker = Tracker(loc)
+    track_scans(tracker, bag.scans[:n], odom[:n], truth[:n], progress=False)
+    assert len(tracker.noise) >= tracker.config.noise_min_samples
+    assert 0.4 <= tracker.noise.position <= 2.5 and 1.0 < tracker.noise.heading <= 4.0
+    fixed = Tracker(loc, TrackerConfig(noise_scale_bounds=(1.0, 1.0)))
+    track_scans(fixed, bag.scans[:n], odom[:n], truth[:n], progress=False)
+    assert (fixed.noise.position, fixed.noise.heading) == (1.0, 1.0)
 
 
 @pytest.mark.slow
@@ -255,6 +275,67 @@ def test_increment_and_prediction_grow_with_motion():
     assert np.sqrt(none[0, 0]) == pytest.approx(cfg.no_odom_std[0])
     with pytest.raises(ValueError, match='odometry pose'):
         check_pose((0.0, 0.0))
+
+
+def _steps(true_scale: tuple[float, float], n: int, seed: int = 0, slips: int = 0):
+    """Odometry steps with ``true_scale`` (position, heading) times the model's noise; slips."""
+    rng = np.random.default_rng(seed)
+    cfg = TrackerConfig()
+    pose_cov = np.diag([0.025 ** 2, 0.025 ** 2, math.radians(0.3) ** 2])   # as on Intel
+    for k in range(n):
+        inc = Increment.between((0.0, 0.0, 0.0), (1.5, 0.2, 0.4))
+        pred, carried, noise = predict_parts((1.0, 2.0, 0.3), pose_cov, inc, cfg)
+        root = np.sqrt([true_scale[0], true_scale[0], true_scale[1]])
+        err = rng.multivariate_normal(np.zeros(3), carried + noise * np.outer(root, root)
+                                      + pose_cov)
+        if k < slips:
+            err = err + np.array([2.0, 0.0, 0.5])          # a wheel slip: far off
+        yield tuple(np.add(pred, err)), pred, noise
+
+
+@pytest.mark.parametrize('true_xy, true_yaw', [(0.15, 0.05), (1.0, 1.0), (3.0, 0.5)])
+def test_the_noise_scales_are_learnt_from_the_innovations(true_xy, true_yaw):
+    """
+    Odometry better or worse than the alphas say: the scales find it, slips hardly matter.
+
+    The poses' own errors (here as large as on the real logs) put them on the large side.
+    """
+    scale = NoiseScale()
+    for step in _steps((true_xy, true_yaw), 60, slips=4):
+        scale.add(*step)
+    assert len(scale) == scale.window
+    assert 0.8 * true_xy <= scale.position <= 2.0 * true_xy
+    assert 0.8 * true_yaw <= scale.heading <= 2.0 * true_yaw + 0.02
+
+
+def test_the_noise_scales_wait_for_samples_and_stay_in_bounds():
+    scale = NoiseScale(min_samples=10, bounds=(0.1, 4.0))
+    for step in _steps((0.001, 0.001), 9):
+        assert scale.add(*step) == (1.0, 1.0)     # too few steps yet
+    scale.add(*next(_steps((0.001, 0.001), 1, seed=1)))
+    assert (scale.position, scale.heading) == (0.1, 0.1)      # far better odometry: the bound
+    for step in _steps((100.0, 100.0), 50):
+        scale.add(*step)
+    assert (scale.position, scale.heading) == (4.0, 4.0)
+    scale.add((math.nan, 0.0, 0.0), (0.0, 0.0, 0.0), np.eye(3))
+    scale.add((1.0, 0.0, 0.0), (0.0, 0.0, 0.0), np.zeros((3, 3)))
+    assert len(scale) == 50                       # a step that is not finite is left out
+    scale.reset()
+    assert (scale.position, scale.heading) == (1.0, 1.0) and len(scale) == 0
+    with pytest.raises(ValueError, match='bounds'):
+        NoiseScale(bounds=(2.0, 4.0))
+    with pytest.raises(ValueError, match='noise_scale_bounds'):
+        TrackerConfig(noise_scale_bounds=(0.5, 0.9))
+    # the prediction: the carried part stays, the noise is scaled (and stays a covariance)
+    inc = Increment.between((0.0, 0.0, 0.0), (1.0, 0.3, 0.2))
+    _, carried, noise = predict_parts((0.0, 0.0, 0.0), np.eye(3) * 1e-4, inc, TrackerConfig())
+    _, cov = predict((0.0, 0.0, 0.0), np.eye(3) * 1e-4, inc, TrackerConfig())
+    assert np.allclose(cov, carried + noise)
+    assert np.allclose(noise, motion_noise(inc, TrackerConfig()))      # heading 0: unrotated
+    scale.position, scale.heading = 0.25, 0.04
+    scaled = scale.apply(noise)
+    assert np.allclose(np.diag(scaled), np.diag(noise) * [0.25, 0.25, 0.04])
+    assert np.linalg.eigvalsh(scaled).min() > 0.0
 
 
 def test_fusion_keeps_the_scan_where_it_is_sure_and_the_prediction_elsewhere():

@@ -1,0 +1,100 @@
+"""
+How noisy this robot's odometry is, learnt from the scans that verify it (beyond the paper).
+
+The motion model (``motion.py``) has one set of ``odom_alphas`` for every robot; real odometry
+differs by an order of magnitude between robots (on the CARMEN logs the squared Mahalanobis
+error of one step under the default alphas averages 0.5 on one robot and 4.5 on another; 3 when
+they fit). A track that has to coast on the odometry (an open hall seen by a short-range laser)
+is only as trustworthy as that noise is right: too large and a right pose is given up after
+one scan, too small and a wrong one is kept.
+
+So the tracker scales the odometry's noise, its position part by ``s_xy`` and its heading part by
+``s_yaw`` (``S Q S`` with ``S = diag(sqrt s_xy, sqrt s_xy, sqrt s_yaw)``: robots differ in how
+much worse they turn than they drive, too), estimated from its own innovations after the
+innovation-based adaptive estimation of a Kalman filter's process noise (Mehra, "On the
+identification of variances and adaptive Kalman filtering", IEEE TAC 1970; Mohamed & Schwarz,
+J. Geodesy 1999). Each step between two verified poses gives an innovation ``d``: the scan's own
+pose minus the prediction from the last verified pose. ``s_xy`` is the median of
+``d_xy^T Q_xy^-1 d_xy`` over the last ``window`` steps divided by the median of a chi-square
+with 2 degrees of freedom, ``s_yaw`` the median of ``d_yaw^2 / Q_yaw`` divided by that of 1
+degree (``Q`` being the odometry noise of each step; a median: a step that slipped or a pose
+that was not quite right moves it little); each bounded by ``bounds``, and 1 until
+``min_samples`` steps are in. The two poses' own errors are left in ``d`` and out of the
+covariance: the scales err on the large (safe) side by them. (Their covariances are
+conservative, about twice their errors' spread on the Intel log; counting them in would put the
+innovations on them and the scales too low.)
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from ..transforms import Pose2, wrap_angle
+
+#: the medians of chi-square variables with 2 and 1 degrees of freedom
+CHI2_2_MEDIAN = 2.0 * math.log(2.0)
+CHI2_1_MEDIAN = 0.454936
+
+
+@dataclass
+class NoiseScale:
+    """The odometry noise scales (position, heading) and the innovations they come from."""
+
+    window: int = 50
+    min_samples: int = 10
+    bounds: tuple[float, float] = (0.02, 4.0)
+    position: float = 1.0
+    heading: float = 1.0
+    _steps: deque = field(default_factory=deque, repr=False)
+
+    def __post_init__(self) -> None:
+        lo, hi = self.bounds
+        if not (0.0 < lo <= 1.0 <= hi and math.isfinite(hi)) or self.window < self.min_samples \
+                or self.min_samples < 1:
+            raise ValueError(f'NoiseScale: bounds (lo, hi) with 0 < lo <= 1 <= hi and '
+                             f'1 <= min_samples <= window, got bounds {self.bounds!r}, '
+                             f'window {self.window}, min_samples {self.min_samples}')
+        self._steps = deque(self._steps, maxlen=self.window)
+
+    def __len__(self) -> int:
+        return len(self._steps)
+
+    def reset(self) -> None:
+        """Forget every step (a different robot or odometry source)."""
+        self._steps.clear()
+        self.position = self.heading = 1.0
+
+    def apply(self, noise: np.ndarray) -> np.ndarray:
+        """Return the odometry noise ``noise`` (x, y, yaw covariance) scaled: ``S Q S``."""
+        root = np.sqrt([self.position, self.position, self.heading])
+        return np.asarray(noise, float) * np.outer(root, root)
+
+    def add(self, measured: Pose2, predicted: Pose2, noise: np.ndarray) -> tuple[float, float]:
+        """
+        Add one step and return the new scales ``(position, heading)``.
+
+        ``measured``: the scan's own pose; ``predicted``: the prediction from the last verified
+        pose; ``noise``: the odometry's noise of the step (Q, unscaled). A step that is not
+        finite, or whose noise is singular, is left out.
+        """
+        d = np.array([measured[0] - predicted[0], measured[1] - predicted[1],
+                      wrap_angle(measured[2] - predicted[2])], float)
+        noise = np.asarray(noise, float)
+        if noise.shape == (3, 3) and np.all(np.isfinite(noise)) and np.all(np.isfinite(d)) \
+                and np.linalg.eigvalsh(0.5 * (noise + noise.T)).min() > 0.0:
+            xy = float(d[:2] @ np.linalg.solve(noise[:2, :2], d[:2]))
+            self._steps.append((xy, float(d[2] ** 2 / noise[2, 2])))
+            self.position, self.heading = self.estimate()
+        return self.position, self.heading
+
+    def estimate(self) -> tuple[float, float]:
+        """Return ``(s_xy, s_yaw)`` of the steps held (1 with fewer than ``min_samples``)."""
+        if len(self._steps) < self.min_samples:
+            return 1.0, 1.0
+        xy, yaw = np.median(np.array(self._steps), axis=0)
+        lo, hi = self.bounds
+        return (min(max(float(xy) / CHI2_2_MEDIAN, lo), hi),
+                min(max(float(yaw) / CHI2_1_MEDIAN, lo), hi))
