@@ -75,9 +75,10 @@ def test_a_straight_run_recovers_the_path(track_bag):
 @pytest.mark.slow
 def test_the_tracker_learns_how_good_its_odometry_is(track_bag):
     """
-    Intel's odometry turns worse than the default alphas say (as the benchmark's logs measure
-    against the ground truth): the heading scale the tracker learns is above 1, the position
-    scale near 1; with the bounds at (1, 1) nothing is learnt.
+    Intel's odometry turns worse than the default alphas say: the tracker learns that.
+
+    (As the benchmark's logs measure against the ground truth.) The heading scale it learns is
+    above 1, the position scale near 1; with the bounds at (1, 1) nothing is learnt.
     """
     bag, odom, truth, kidnaps, loc = track_bag
     n = kidnaps[0]
