@@ -100,9 +100,10 @@ def verdict(ts: TrackSummary) -> str:
 
 
 def _track(localizer: GlobalLocalizer, config, seq: ScanSequence, odometry: bool = True):
-    rows = track_scans(Tracker(localizer, config), seq.scans, seq.odom if odometry else None,
-                       seq.truth, progress=False)
-    return rows, summarize_track(rows, seq.kidnaps or None)
+    tracker = Tracker(localizer, config)
+    rows = track_scans(tracker, seq.scans, seq.odom if odometry else None, seq.truth,
+                       progress=False)
+    return rows, summarize_track(rows, seq.kidnaps or None), tracker.noise
 
 
 def _single(localizer: GlobalLocalizer, seq: ScanSequence, tracked) -> str:
@@ -129,7 +130,7 @@ def random_kidnaps(localizer: GlobalLocalizer, config, seq: ScanSequence, count:
             i, j = (int(v) for v in rng.integers(KIDNAP_BEFORE - 1, len(seq) - KIDNAP_AFTER, 2))
             if np.hypot(*(truth[i, :2] - truth[j, :2])) >= 1.0:
                 break
-        _, ts = _track(localizer, config, splice_kidnaps(seq, [(i, j)]))
+        _, ts, _ = _track(localizer, config, splice_kidnaps(seq, [(i, j)]))
         wrong += ts.recoveries[0].wrong_ok
         recoveries.append(ts.recoveries[0].scans)
     counts = Counter('never' if r is None else str(r) for r in recoveries)
@@ -159,10 +160,14 @@ def run(args: argparse.Namespace) -> int:
             runs.append((f'kid{args.max_range:g}m', kidnap_sequence(real).limited(args.max_range),
                          True))
         for label, seq, odometry in runs:
-            rows, ts = _track(localizer, track_cfg, seq, odometry)
+            rows, ts, noise = _track(localizer, track_cfg, seq, odometry)
             print(ts.format(f'{name:6s} {label:7s} [{split_of(name, TUNING_SETS)}]'),
                   flush=True)
             print(verdict(ts), flush=True)
+            if odometry:
+                print(f'  odometry noise learnt (scale of the odom_alphas noise): position '
+                      f'{noise.position:.2f}, heading {noise.heading:.2f}, from the last '
+                      f'{len(noise)} steps between verified poses', flush=True)
             if odometry and not seq.kidnaps and args.single:
                 print(_single(localizer, seq, rows), flush=True)
             if args.plot_dir:

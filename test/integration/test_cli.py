@@ -267,6 +267,11 @@ def test_bench_track_prints_both_sequences_and_the_targets(tmp_path, capsys):
     counts = re.search(r'recoveries ([0-9, ]+) \|', kidnap).group(1).split(',')
     assert len(counts) == 2 and all(1 <= int(c) <= 3 for c in counts), kidnap
     assert out.count('targets:') == 2
+    # the odometry noise each tracked sequence learnt (ACES: better odometry than the alphas)
+    learnt = re.findall(r'odometry noise learnt .*: position ([0-9.]+), heading ([0-9.]+), from '
+                        r'the last (\d+) steps', out)
+    assert len(learnt) == 2 and all(int(n) >= 10 for _, _, n in learnt), out
+    assert all(float(pos) < 1.0 for pos, _, _ in learnt), learnt
     assert sorted(p.name for p in (tmp_path / 'plots').iterdir()) == [
         'track_aces_kidnap.png', 'track_aces_real.png']
     assert (tmp_path / 'work' / 'aces_even.yaml').is_file()
