@@ -132,14 +132,10 @@ def _check_tree(tree, features: int) -> None:
     Each node is ``(feature, threshold, left, right, value)``; a split names one of the
     ``features`` inputs and leads to later nodes.
     """
-    ok = len(tree) > 0
-    for k, node in enumerate(tree):
-        if len(node) != 5:
-            ok = False
-            break
-        f, _, lo, hi, _ = node
-        if f >= 0 and not (f < features and k < lo < len(tree) and k < hi < len(tree)):
-            ok = False
+    n = len(tree)
+    ok = n > 0 and all(len(node) == 5 for node in tree) and all(
+        f < 0 or (f < features and k < lo < n and k < hi < n)
+        for k, (f, _, lo, hi, _) in enumerate(tree))
     if not ok:
         raise ValueError('ConfidenceModel.trees: nodes (feature, threshold, left, right, value) '
                          'with features in range and children after their parent')

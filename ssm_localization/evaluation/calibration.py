@@ -237,20 +237,21 @@ def fit_confidence(values: Sequence[dict[str, float]], right: Sequence[bool],
     g = np.asarray(groups)
 
     def fit(rows):
+        """The regression, and the trees grown from its score, on the answers ``rows``."""
         mean, scale, w, b = fit_logistic(x[rows], y[rows], sw[rows], l2)
-        trees = ()
-        if boosted is not None:
-            trees = fit_boosted(x[rows], y[rows], b + ((x[rows] - mean) / scale) @ w,
-                                sw[rows], **boosted)
-        return (lambda z: b + ((z - mean) / scale) @ w
-                + sum((tree_values(t, z) for t in trees), np.zeros(len(z)))), \
-            (mean, scale, w, b, trees)
+        trees = () if boosted is None else fit_boosted(
+            x[rows], y[rows], b + ((x[rows] - mean) / scale) @ w, sw[rows], **boosted)
+        return mean, scale, w, b, trees
+
+    def score(z, mean, scale, w, b, trees):
+        return b + ((z - mean) / scale) @ w + sum((tree_values(t, z) for t in trees),
+                                                  np.zeros(len(z)))
 
     held = np.zeros(len(y))
     for name in np.unique(g):
         out = g == name
-        held[out] = fit(~out)[0](x[out])
-    mean, scale, w, b, trees = fit(np.ones(len(y), bool))[1]
+        held[out] = score(x[out], *fit(~out))
+    mean, scale, w, b, trees = fit(np.ones(len(y), bool))
     return ConfidenceModel(features=tuple(features), mean=tuple(float(v) for v in mean),
                            scale=tuple(float(v) for v in scale),
                            weights=tuple(float(v) for v in w), intercept=float(b),

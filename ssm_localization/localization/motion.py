@@ -70,16 +70,16 @@ def motion_noise(inc: Increment, config: TrackerConfig) -> np.ndarray:
     return cov + np.diag([xy ** 2, xy ** 2, yaw ** 2])
 
 
-def predict(pose: Pose2, cov: np.ndarray, inc: Increment | None, config: TrackerConfig,
-            noise_scale: float = 1.0) -> tuple[Pose2, np.ndarray]:
+def predict(pose: Pose2, cov: np.ndarray, inc: Increment | None,
+            config: TrackerConfig) -> tuple[Pose2, np.ndarray]:
     """
     Move a pose (map frame) and its covariance by an odometry increment.
 
     ``inc`` None: no odometry; the pose stays and its covariance grows by ``no_odom_std``.
-    ``noise_scale`` multiplies the odometry's noise (``noise.py``: learnt from the scans).
+    (The tracker scales the odometry's part by what it learnt: :func:`predict_parts`.)
     """
     new, carried, noise = predict_parts(pose, cov, inc, config)
-    return new, carried + noise_scale * noise
+    return new, carried + noise
 
 
 def predict_parts(pose: Pose2, cov: np.ndarray, inc: Increment | None,

@@ -48,7 +48,7 @@ class NoiseScale:
     bounds: tuple[float, float] = (0.02, 4.0)
     position: float = 1.0
     heading: float = 1.0
-    _steps: deque = field(default_factory=deque, repr=False)
+    _steps: deque = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         lo, hi = self.bounds
@@ -57,7 +57,7 @@ class NoiseScale:
             raise ValueError(f'NoiseScale: bounds (lo, hi) with 0 < lo <= 1 <= hi and '
                              f'1 <= min_samples <= window, got bounds {self.bounds!r}, '
                              f'window {self.window}, min_samples {self.min_samples}')
-        self._steps = deque(self._steps, maxlen=self.window)
+        self._steps = deque(maxlen=self.window)
 
     def __len__(self) -> int:
         return len(self._steps)
