@@ -237,7 +237,7 @@ def fit_confidence(values: Sequence[dict[str, float]], right: Sequence[bool],
     g = np.asarray(groups)
 
     def fit(rows):
-        """The regression, and the trees grown from its score, on the answers ``rows``."""
+        """Fit the regression, and the trees grown from its score, on the answers ``rows``."""
         mean, scale, w, b = fit_logistic(x[rows], y[rows], sw[rows], l2)
         trees = () if boosted is None else fit_boosted(
             x[rows], y[rows], b + ((x[rows] - mean) / scale) @ w, sw[rows], **boosted)
