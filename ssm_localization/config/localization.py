@@ -43,6 +43,10 @@ class LocalizerConfig:
     search_sigma: float = param(0.1, 'width of the correlative likelihood, metres')
     search_cell: float = param(0.05, 'cell size of the search, metres (rounded to a whole number '
                                      'of map cells, at least one)')
+    search_max_cells: int = param(8_000_000, 'a map with more cells is searched on cells 2, 4, '
+                                             '... times search_cell wide, the fewest that keep '
+                                             'the search grid within this many cells (0: no '
+                                             'cap); the cost of a search grows with its cells')
     search_points: int = param(40, 'scan points (of the spatially even set) the search scores')
     search_alignments: int = param(2, "further seed yaws from aligning the scan's wall "
                                       "directions with the map's")
@@ -113,6 +117,7 @@ class LocalizerConfig:
                     'distinct_xy', 'distinct_yaw', 'max_position_std', 'covariance_scale',
                     'sigma_d')
         nonnegative = ('vote_descriptor_dims', 'search_spread', 'search_alignments',
+                       'search_max_cells',
                        'refine_iterations', 'polish_iterations', 'surface_depth',
                        'search_min_score', 'contradiction_weight', 'max_contradicting',
                        'min_score', 'verify_margin', 'ambiguity_margin', 'min_position_std',

@@ -49,7 +49,8 @@ def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
     with layer(LAYER_NAMES[0]):
         grid = CorrelativeGrid(m, occupied_thresh=thresh, sigma=cfg.search_sigma,
                                depth=cfg.search_depth, max_range=cfg.max_cast_range,
-                               coarsen=max(1, round(cfg.search_cell / m.resolution)))
+                               coarsen=search_coarsening(m.width * m.height, m.resolution,
+                                                         cfg))
     with layer(LAYER_NAMES[1]):
         # exact wherever the refinement, the evidence or the explained fraction can look
         reach = exact_reach(cfg.score_sigma, max(cfg.refine_radius))
@@ -64,3 +65,19 @@ def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
         regions = SearchRegions.build(grid, voting, index.node_xy)
     return MapLayers(voting=voting, grid=grid, surface=surface, caster=caster,
                      regions=regions)
+
+
+def search_coarsening(cells: int, resolution: float, cfg: LocalizerConfig) -> int:
+    """
+    Return how many map cells wide a cell of the correlative search is.
+
+    ``search_cell`` in map cells (at least one), doubled while the search grid would hold more
+    than ``search_max_cells`` cells: the search's cost grows with its cells. Powers of two,
+    because on the campus cells two and four times as wide kept the right answers and three
+    times as wide lost some (docs/BENCHMARKS.md).
+    """
+    coarsen = max(1, round(cfg.search_cell / resolution))
+    if cfg.search_max_cells > 0:
+        while cells / coarsen ** 2 > cfg.search_max_cells:
+            coarsen *= 2
+    return coarsen

@@ -6,7 +6,9 @@ import math
 import numpy as np
 import pytest
 from scipy import ndimage
+from ssm_localization.config.localization import LocalizerConfig
 from ssm_localization.localization.correlative import CorrelativeGrid, likelihood_grid
+from ssm_localization.localization.map_layers import search_coarsening
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
 
@@ -187,3 +189,18 @@ def test_region_ratio_keeps_each_regions_best_place():
     # without regions the result is the plain search's, and says no regions
     plain = grid.search(pts, yaws=[0.4], min_score=0.1, ratio=0.95)
     assert plain.regions is None
+
+
+def test_large_maps_are_searched_on_coarser_cells():
+    """The search grid is capped: 2, 4, ... map cells a search cell, the fewest that fit."""
+    cfg = LocalizerConfig(search_max_cells=8_000_000)
+    assert search_coarsening(5_000_000, 0.05, cfg) == 1
+    assert search_coarsening(8_000_000, 0.05, cfg) == 1
+    assert search_coarsening(8_000_001, 0.05, cfg) == 2
+    assert search_coarsening(27_600_000, 0.05, cfg) == 2
+    assert search_coarsening(40_000_000, 0.05, cfg) == 4
+    # the configured cell first, then doubled; 0 turns the cap off
+    assert search_coarsening(5_000_000, 0.025, LocalizerConfig(search_cell=0.1)) == 4
+    assert search_coarsening(40_000_000, 0.05, LocalizerConfig(search_max_cells=0)) == 1
+    with pytest.raises(ValueError):
+        LocalizerConfig(search_max_cells=-1)
