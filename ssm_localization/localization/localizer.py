@@ -15,8 +15,10 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
    map at the yaws of the best hypotheses and their flips, which finds the places the voting
    missed (typically a corridor whose position along it only far walls tell);
 6. refinement (``refine.py``): Gauss-Newton on the map's wall surface, the surface offset
-   estimated from the scan; the explained fraction ``mean exp(-r^2 / 2 score_sigma^2)`` over the
-   even points measures how much of the scan a pose explains;
+   estimated from the scan, on the even points, and once more from the optimum of every
+   endpoint (the few even points alone can settle half a degree off); the explained fraction
+   ``mean exp(-r^2 / 2 score_sigma^2)`` over the even points measures how much of the scan a
+   pose explains;
 7. verification (``verify.py``): ray casting; beams seeing through walls count against a pose;
 8. the answer: ``failed`` when the best pose explains too little of the scan, ``ambiguous`` when a
    distinct pose scores within ``ambiguity_margin`` or the geometry leaves the position
@@ -378,7 +380,7 @@ class GlobalLocalizer:
                                        'correlative search found a place that fits')
         ranked = _by_correlation(hyps)
         todo = self.to_refine(ranked)
-        refined = self.refine(query, todo, len(todo))
+        refined = self.refine(query, todo, len(todo), basin=True)
         clock.lap('refine')
         verified = self.verify_contenders(query, refined)
         clock.lap('verify')
@@ -508,23 +510,40 @@ class GlobalLocalizer:
         return with_region_bests(self.regions, ranked, self.config.refine_hypotheses,
                                  lambda h: h.initial_pose, lambda h: 'search' in h.found_by)
 
-    def refine(self, query: Query, hyps: list[Hypothesis],
-               limit: int | None = None) -> list[Hypothesis]:
+    def refine(self, query: Query, hyps: list[Hypothesis], limit: int | None = None,
+               basin: bool = False) -> list[Hypothesis]:
         """
         Return the first ``limit`` hypotheses refined on the wall surface (batched).
 
-        ``limit`` defaults to :meth:`to_refine`'s choice; those that meet are merged; best
-        explained first.
+        Gauss-Newton on the spatially even points, the truncation radius shrinking as
+        configured. ``basin`` (the global search's hypotheses): also a second start, first on
+        every endpoint of the scan, then on the even points at the last radius, and each
+        hypothesis keeps whichever optimum explains more of the scan. From a search leaf 5 cm and
+        0.35 degrees off, the even points alone settled 0.5 degrees off (explaining 0.87 of the
+        scan where the truth explains 0.99) and lost to a look-alike room of the 30 M-cell
+        office; every endpoint finds the right basin. The tracker, which starts at its
+        prediction, refines once. ``limit`` defaults to :meth:`to_refine`'s choice; those that
+        meet are merged; best explained first.
         """
         cfg = self.config
         todo = hyps[:limit] if limit is not None else self.to_refine(hyps)
         if not todo:
             return []
-        results = refine_poses(self.surface, query.features.points,
-                               np.array([h.initial_pose for h in todo]),
+        common = {'estimate_depth': cfg.estimate_depth, 'depth_prior': cfg.surface_depth_std,
+                  'score_sigma': cfg.score_sigma}
+        starts = np.array([h.initial_pose for h in todo])
+        results = refine_poses(self.surface, query.features.points, starts,
                                iterations=cfg.refine_iterations, truncate=cfg.refine_radius,
-                               estimate_depth=cfg.estimate_depth,
-                               depth_prior=cfg.surface_depth_std, score_sigma=cfg.score_sigma)
+                               **common)
+        if basin:
+            wide = refine_poses(self.surface, query.points, starts,
+                                iterations=cfg.refine_iterations, truncate=cfg.refine_radius,
+                                **common)
+            last = (cfg.refine_radius[1], cfg.refine_radius[1])
+            again = refine_poses(self.surface, query.features.points,
+                                 np.array([r.pose for r in wide]),
+                                 iterations=cfg.refine_iterations, truncate=last, **common)
+            results = [b if b.explained > a.explained else a for a, b in zip(results, again)]
         done = [replace(h, laser_pose=r.pose, explained=r.explained, depth=r.depth, refined=True,
                         score=r.explained, pose=self.base_pose(r.pose),
                         covariance=self.report_covariance(r.covariance, r.pose))

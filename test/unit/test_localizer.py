@@ -181,6 +181,21 @@ def test_refine_estimates_the_wall_offset_of_ray_cast_scans(depot, localizer, qu
     assert refined.explained > 0.9 and refined.refined
 
 
+def test_a_second_start_from_every_endpoint_keeps_the_better_optimum(depot, localizer, query):
+    """``basin``: each hypothesis keeps whichever refinement explains more of the scan."""
+    truth = _truth(depot)
+    rng = np.random.default_rng(3)
+    hyps = [Hypothesis(source='search', initial_pose=(truth[0] + dx, truth[1] + dy,
+                                                      truth[2] + da))
+            for dx, dy, da in zip(rng.uniform(-0.3, 0.3, 12), rng.uniform(-0.3, 0.3, 12),
+                                  rng.uniform(-0.05, 0.05, 12))]
+    once = localizer.refine(query, hyps, len(hyps))
+    twice = localizer.refine(query, hyps, len(hyps), basin=True)
+    by_start = {h.initial_pose: h.explained for h in once}
+    assert all(h.explained >= by_start[h.initial_pose] - 1e-12 for h in twice)
+    assert max(h.explained for h in twice) > 0.9
+
+
 def test_localization_result_fields(depot, localizer):
     bag, index = depot
     s = bag.scans[0]
