@@ -31,12 +31,13 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
+from scipy.special import chdtri
 
 from ..transforms import Pose2, wrap_angle
 
 #: the medians of chi-square variables with 2 and 1 degrees of freedom
-CHI2_2_MEDIAN = 2.0 * math.log(2.0)
-CHI2_1_MEDIAN = 0.454936
+CHI2_2_MEDIAN = float(chdtri(2, 0.5))
+CHI2_1_MEDIAN = float(chdtri(1, 0.5))
 
 
 @dataclass
