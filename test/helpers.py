@@ -119,6 +119,23 @@ class RosHarness:
                 return value
             time.sleep(period)
 
+    @classmethod
+    def wait_for_log(cls, capfd, *texts: str, timeout: float = 5.0) -> str:
+        """
+        Return stderr read so far and until every one of ``texts`` is in it (or the timeout).
+
+        A node logs from its executor threads, so a line may follow the state change a test
+        waited for by a few milliseconds; the test waits for the line, not only the state.
+        """
+        seen: list[str] = []
+
+        def logged() -> bool:
+            seen.append(capfd.readouterr().err)
+            return all(t in ''.join(seen) for t in texts)
+
+        cls.wait_for(logged, timeout)
+        return ''.join(seen)
+
     def call(self, client, request, timeout: float = 30.0):
         """Call a service (waits for it first); the response, or None on timeout."""
         if not client.wait_for_service(timeout_sec=min(timeout, 10.0)):

@@ -236,7 +236,7 @@ def test_corrupt_index_file_falls_back_to_the_map_topic(ros, tmp_path, capfd):
     rig = Rig(ros, index_file=str(bad))
     rig.map_pub.publish(occupancy_grid_from_map(occ))
     assert rig.ready()
-    err = capfd.readouterr().err
+    err = ros.wait_for_log(capfd, 'cannot use index file', 'falling back to the map on /map')
     assert 'cannot use index file' in err and 'falling back to the map on /map' in err
     res = rig.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message
@@ -254,7 +254,7 @@ def test_index_of_another_map_is_not_used_silently(ros, tmp_path, capfd):
     rig.map_pub.publish(occupancy_grid_from_map(right))
     assert rig.ready()
     assert ros.wait_for(lambda: rig.node.map_state().detail == 'map topic', 60)
-    err = capfd.readouterr().err
+    err = ros.wait_for_log(capfd, 'was built for another map')
     assert 'was built for another map' in err or 'is not the map' in err
     res = rig.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message

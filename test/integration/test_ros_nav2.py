@@ -122,7 +122,8 @@ def test_bt_call_answered_at_once_and_the_robot_relocalized(ros, world, capfd):
     msg = rig.poses[-1]
     assert close_pose(pose_from_msg(msg.pose.pose), _truth(sim, msg), POS_TOL, YAW_TOL)
     assert answered < 0.5, f'{answered * 1000:.0f} ms'     # nav2's 20 ms on an idle machine
-    assert 'reinitialize_global_localization: localized' in capfd.readouterr().err
+    err = ros.wait_for_log(capfd, 'reinitialize_global_localization: localized')
+    assert 'reinitialize_global_localization: localized' in err
 
 
 # ---------------------------------------------------------------------------- the hand-over
@@ -161,7 +162,7 @@ def test_handover_republished_until_a_late_amcl_confirms(ros, world, capfd):
     handed = amcl.got[0]
     assert close_pose(pose_from_msg(handed.pose.pose), _truth(sim, handed), POS_TOL, YAW_TOL)
     assert handed.header.stamp == rig.poses[-1].header.stamp     # the scan's stamp, kept
-    err = capfd.readouterr().err
+    err = ros.wait_for_log(capfd, 'hand-over: ', 'confirms the pose (published')
     assert 'hand-over: ' in err and 'confirms the pose (published' in err
 
 
@@ -173,7 +174,7 @@ def test_handover_gives_up_with_a_clear_error(ros, world, capfd):
     assert rig.wait_ready()
     assert _feed(rig, sim, lambda: rig.poses, 30)
     assert ros.wait_for(lambda: not rig.node.handover.pending, 5.0)
-    err = capfd.readouterr().err
+    err = ros.wait_for_log(capfd, 'hand-over: nobody took', 'Is AMCL running and active')
     assert 'hand-over: nobody took the pose published 3 times on /initialpose' in err
     assert '/amcl_pose' in err and 'Is AMCL running and active' in err
 

@@ -136,7 +136,7 @@ def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
                         and not node.builder.busy, 60)
     assert np.array_equal(node.index.map.data, second.data)
     assert len(started) == 2
-    assert 'dropped, a newer map arrived' in capfd.readouterr().err
+    assert 'dropped, a newer map arrived' in ros.wait_for_log(capfd, 'dropped, a newer map')
     time.sleep(0.3)
     assert len([a for a in got if _has_nodes(a)]) == 1     # only the complete, newest index
 
