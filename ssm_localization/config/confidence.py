@@ -51,7 +51,8 @@ class ConfidenceModel:
     #: P(right) of answers the rules refuse before the model is asked, by reason (``implausible``:
     #: too much seen through walls or too little explained; ``rival``: a distinct pose scores
     #: about as well; ``degenerate``: the position is undetermined along some direction), the
-    #: rate at which such answers were right on the calibration split
+    #: rate at which such answers were right on the calibration split (``rival`` as measured;
+    #: the verdict reports ``min(P, 1/k)`` for those, ``localizer.verdict``)
     refused: dict[str, float] = field(default_factory=lambda: dict(REFUSED_REASONS))
     calibration: tuple[tuple[float, float], ...] = ()
     split: str = ''

@@ -377,9 +377,18 @@ def test_verdict_asks_the_confidence_once_the_rules_pass():
     assert ('low confidence' in msg) if status == 'ambiguous' else ('more likely wrong' in msg)
     status, _, _, conf = verdict([best], cfg, None)
     assert status == 'failed' and conf == 0.0
-    # a refused answer reports the rate at which such answers were right when calibrating
+    # a refused answer reports the rate at which such answers were right when calibrating;
+    # one refused for its rivals at most one in k: k poses fit and the scan cannot tell which
     rival = _verified((5.0, 0.0, 0.0), 0.8)
-    assert verdict([best, rival], cfg, STRONG)[3] == CONFIDENCE_MODEL.refused['rival']
+    third = _verified((0.0, 6.0, 0.0), 0.8)
+    assert verdict([best, rival], cfg, STRONG)[:2][0] == 'ambiguous'
+    assert verdict([best, rival], cfg, STRONG)[3] == 0.5
+    assert verdict([best, rival, third], cfg, STRONG)[3] == pytest.approx(1.0 / 3.0)
+    assert verdict([best, rival], cfg, weak)[3] == pytest.approx(min(0.5, verdict(
+        [best], cfg, weak)[3]))
+    assert verdict([best, rival], cfg, None)[3] == 0.0
+    assert verdict([_verified((0.0, 0.0, 0.0), 0.8, 1.5 * cfg.max_position_std)], cfg,
+                   STRONG)[3] == CONFIDENCE_MODEL.refused['degenerate']
 
 
 def _identical_rooms(n: int = 5, size: float = 3.0, res: float = 0.05) -> OccupancyMap:
