@@ -381,7 +381,7 @@ def test_verdict_asks_the_confidence_once_the_rules_pass():
     # one refused for its rivals at most one in k: k poses fit and the scan cannot tell which
     rival = _verified((5.0, 0.0, 0.0), 0.8)
     third = _verified((0.0, 6.0, 0.0), 0.8)
-    assert verdict([best, rival], cfg, STRONG)[:2][0] == 'ambiguous'
+    assert verdict([best, rival], cfg, STRONG)[0] == 'ambiguous'
     assert verdict([best, rival], cfg, STRONG)[3] == 0.5
     assert verdict([best, rival, third], cfg, STRONG)[3] == pytest.approx(1.0 / 3.0)
     assert verdict([best, rival], cfg, weak)[3] == pytest.approx(min(0.5, verdict(
