@@ -97,7 +97,8 @@ class ScanFeatures:
         return cls(**vals)
 
 
-def prepare_scan(points_xy, config: MatcherConfig | None = None) -> ScanFeatures:
+def prepare_scan(points_xy, config: MatcherConfig | None = None, *,
+                 fine: bool = True) -> ScanFeatures:
     """
     Prepare one scan: downsample, tangents (eq. 1) and descriptors.
 
@@ -106,7 +107,9 @@ def prepare_scan(points_xy, config: MatcherConfig | None = None) -> ScanFeatures
     Non-finite points are dropped; fewer than 3 points give features with ``is_degenerate``
     (the matcher then returns an empty result). Three spatially even subsets are taken: the
     matching points (``config.max_points``), a context set (``config.context_spacing``) for
-    tangents and descriptors, and the denser ICP set (``config.icp_max_points``).
+    tangents and descriptors, and the denser ICP set (``config.icp_max_points``). With ``fine``
+    False the ICP set is left empty (the scan is only voted with or matched without ICP: the
+    map index's nodes, ``mapping/index.py``).
     """
     config = config or MatcherConfig()
     p = as_points(points_xy)
@@ -127,7 +130,10 @@ def prepare_scan(points_xy, config: MatcherConfig | None = None) -> ScanFeatures
         if config.length_cap > 0 else None
     desc = shape_context(pts, u, config.desc_radius, config.desc_radial_bins,
                          config.desc_angular_bins, context=ctx, offsets=offsets, weights=cw)
-    fine = p[downsample_even(p, config.icp_max_points, config.icp_min_spacing)]
-    fn, fw = local_normals(fine, config.normal_radius)
+    if fine:
+        dense = p[downsample_even(p, config.icp_max_points, config.icp_min_spacing)]
+        fn, fw = local_normals(dense, config.normal_radius)
+    else:
+        dense, fn, fw = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
     return ScanFeatures(points=pts, tangents=u, descriptors=desc, source_index=src,
-                        fine_points=fine, fine_normals=fn, fine_weights=fw)
+                        fine_points=dense, fine_normals=fn, fine_weights=fw)

@@ -19,6 +19,7 @@ from ssm_localization.localization.map_layers import LAYER_NAMES
 from ssm_localization.mapping.index import FORMAT_VERSION, INDEX_LAYERS
 from ssm_localization.mapping.raycast import cast_rays
 from ssm_localization.mapping.topology import NodeKind
+from ssm_localization.matching.features import prepare_scan
 
 RES = 0.05
 
@@ -73,6 +74,12 @@ def test_features_are_the_virtual_scan_in_the_laser_frame(built):
         a = index.beam_angles[ok]
         pts = np.column_stack((index.ranges[k, ok] * np.cos(a), index.ranges[k, ok] * np.sin(a)))
         assert np.allclose(f.points, pts[f.source_index])
+        # the nodes keep no ICP set (nothing matches them with ICP); the rest is the same
+        assert len(f.fine_points) == len(f.fine_normals) == len(f.fine_weights) == 0
+        full = prepare_scan(pts, index.config.matcher)
+        assert len(full.fine_points) > 0
+        for name in ('points', 'tangents', 'descriptors', 'source_index'):
+            assert np.array_equal(getattr(f, name), getattr(full, name)), name
 
 
 def test_progress_reports_increasing_fraction(built):
