@@ -359,8 +359,10 @@ class GlobalLocalizer:
         if len(points) < self.config.min_points:
             raise SparseScan(f'too few valid points ({len(points)} < {self.config.min_points})',
                              angles, beams, sensor_range(range_max))
-        return Query(features=prepare_scan(points, self.matcher_config), points=points,
-                     angles=angles, beams=beams, range_max=sensor_range(range_max))
+        # no ICP set: the localizer votes with the features and refines on the wall surface
+        return Query(features=prepare_scan(points, self.matcher_config, fine=False),
+                     points=points, angles=angles, beams=beams,
+                     range_max=sensor_range(range_max))
 
     def localize_query(self, query: Query, clock: StageClock | None = None) -> Localization:
         """Return the whole pipeline on a prepared query."""
@@ -529,20 +531,19 @@ class GlobalLocalizer:
         todo = hyps[:limit] if limit is not None else self.to_refine(hyps)
         if not todo:
             return []
-        common = {'estimate_depth': cfg.estimate_depth, 'depth_prior': cfg.surface_depth_std,
-                  'score_sigma': cfg.score_sigma}
-        starts = np.array([h.initial_pose for h in todo])
-        results = refine_poses(self.surface, query.features.points, starts,
-                               iterations=cfg.refine_iterations, truncate=cfg.refine_radius,
-                               **common)
+
+        def gauss_newton(points, starts, truncate=cfg.refine_radius):
+            return refine_poses(self.surface, points, np.asarray(starts),
+                                iterations=cfg.refine_iterations, truncate=truncate,
+                                estimate_depth=cfg.estimate_depth,
+                                depth_prior=cfg.surface_depth_std, score_sigma=cfg.score_sigma)
+
+        starts = [h.initial_pose for h in todo]
+        results = gauss_newton(query.features.points, starts)
         if basin:
-            wide = refine_poses(self.surface, query.points, starts,
-                                iterations=cfg.refine_iterations, truncate=cfg.refine_radius,
-                                **common)
-            last = (cfg.refine_radius[1], cfg.refine_radius[1])
-            again = refine_poses(self.surface, query.features.points,
-                                 np.array([r.pose for r in wide]),
-                                 iterations=cfg.refine_iterations, truncate=last, **common)
+            wide = gauss_newton(query.points, starts)
+            again = gauss_newton(query.features.points, [r.pose for r in wide],
+                                 (cfg.refine_radius[1], cfg.refine_radius[1]))
             results = [b if b.explained > a.explained else a for a, b in zip(results, again)]
         done = [replace(h, laser_pose=r.pose, explained=r.explained, depth=r.depth, refined=True,
                         score=r.explained, pose=self.base_pose(r.pose),
