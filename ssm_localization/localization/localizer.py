@@ -587,9 +587,9 @@ class GlobalLocalizer:
                      if h.check is None and h.explained >= best - margin]
         return out
 
-    def check_at(self, pose: Pose2, sparse: SparseScan) -> BeamCheck:
+    def check_at(self, pose: Pose2, sparse: SparseScan | Query) -> BeamCheck:
         """
-        Return the ray check of a scan too sparse to be a :class:`Query` at a base pose.
+        Return the ray check of a scan (too sparse to be a :class:`Query`, or one) at a base pose.
 
         What :meth:`verify` does for a hypothesis: do its few returns and its no-returns agree
         with the map there?

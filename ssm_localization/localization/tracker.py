@@ -34,7 +34,9 @@ Per scan (``Tracker.track``):
    below one half) the same scan goes through global localization: an ``ok`` there is a
    relocalization, anything else is reported as such (never ``ok``) and counts as a miss; after
    ``max_misses`` misses in a row the tracker is lost and localizes every scan globally until
-   an ``ok``.
+   an ``ok``. A scan that fits nowhere but does not contradict the prediction (short returns
+   in front of the walls: visitors, exhibits) is no miss: the prediction is held (``ambiguous``)
+   while the odometry keeps it likely right (``_hold``).
 8. coast: a scan with too few returns to track (an open hall seen by a short-range laser) is
    ray-cast at the prediction; if the map agrees that little is in range there, the prediction
    is the answer, its confidence the last verified pose's times the probability that the
@@ -506,12 +508,46 @@ class Tracker:
                 where = ('far from the prediction (kidnapped?): ' if m2 > self.config.gate_chi2
                          else 'near the prediction: ')
             return self._adopt(t0, stamp, glob, f'{why}relocalized {where}', pred)
+        if pred is not None:
+            held = self._hold(t0, stamp, query, pred, pred_cov, why, glob)
+            if held is not None:
+                return held
         self._miss()
         return self._result(t0, stamp, glob.status, glob.pose if glob.pose is not None else pred,
                             f'{why}global localization {glob.status}: {glob.message}',
                             covariance=glob.covariance, score=glob.score, node=glob.node,
                             predicted=pred, mode=LOST, localization=glob,
                             confidence=glob.confidence, evidence=glob.evidence)
+
+    def _hold(self, t0: float, stamp: float, query: Query, pred: Pose2, pred_cov: np.ndarray,
+              why: str, glob: Localization) -> TrackResult | None:
+        """
+        Keep the prediction over a scan that fits nowhere but does not contradict it.
+
+        A scan mostly of things the map does not hold (visitors, exhibits, furniture seen by a
+        short-range laser) explains too little anywhere, at the right pose too; when global
+        localization finds no ``ok`` either and at the prediction at most
+        ``coast_disagreement`` of its beams disagree with the map (a return through a wall, no
+        return where a wall is in range: the short returns are clutter in front of the walls),
+        the scan is no evidence against the track. The prediction stays the belief and the
+        scan is no miss, as for a scan with too few returns (:meth:`_coast`), but it is never
+        ``ok``: its confidence is the last verified pose's times the probability that the
+        odometry kept it right, capped at one half. Once that falls below ``lost_confidence``
+        the track is not held any longer (None: a miss).
+        """
+        cfg = self.config
+        conf = self._confidence * within_right(pred_cov)
+        if conf < cfg.lost_confidence:
+            return None
+        check = self.localizer.check_at(pred, query)
+        disagree = (check.missing + check.through) / max(check.beams, 1)
+        if disagree > cfg.coast_disagreement:
+            return None
+        return self._result(t0, stamp, AMBIGUOUS, pred, f'{why}global localization '
+                            f'{glob.status}; holding the prediction: the map agrees with '
+                            f'{1.0 - disagree:.0%} of its beams there (clutter?), confidence '
+                            f'{conf:.3f}', covariance=pred_cov, predicted=pred, mode=TRACKED,
+                            localization=glob, confidence=min(conf, 0.5))
 
     def _miss(self) -> None:
         """Count a scan without a verified pose; too many in a row and the track is dropped."""

@@ -247,6 +247,42 @@ def test_a_pose_that_is_not_ok_does_not_move_the_track(track_bag):
         assert tracker.pose == res.predicted and tracker.pose != res.pose
 
 
+def test_a_scan_of_clutter_holds_the_track_and_a_contradicting_one_is_a_miss(track_bag):
+    """Returns all short of the walls explain little anywhere but contradict nothing: held."""
+    bag, odom, truth, _, loc = track_bag
+    tracker = Tracker(loc, TrackerConfig(max_misses=1))
+    assert tracker.track(bag.scans[0], odom[0]).ok
+
+    def clutter(k):     # every return a third of the way to its wall: what the map does not hold
+        return dataclasses.replace(bag.scans[k], ranges=np.asarray(bag.scans[k].ranges) / 3.0)
+
+    res = tracker.track(clutter(1), odom[1])
+    assert res.status == 'ambiguous' and 'holding the prediction' in res.message, res.message
+    assert res.pose == res.predicted and tracker.pose == res.predicted
+    assert 0.0 < res.confidence <= 0.5 and not tracker.lost        # held: no miss
+    res = tracker.track(bag.scans[2], odom[2])
+    assert res.mode == 'tracked' and res.ok and _error(res.pose, truth[2])[0] < 0.3, res.message
+    # held only while the odometry keeps the prediction likely right: then misses, and lost
+    held = 0
+    for k in range(3, 12):
+        res = tracker.track(clutter(k), odom[k])
+        assert res.status != 'ok'
+        if 'holding' not in res.message:
+            break
+        held += 1
+    assert 1 <= held < 8 and not tracker.lost
+    assert tracker.track(clutter(k + 1), odom[k + 1]).status != 'ok' and tracker.lost
+    # returns from beyond the walls: evidence against the track, a miss each
+    tracker = Tracker(loc, TrackerConfig(max_misses=1))
+    assert tracker.track(bag.scans[0], odom[0]).ok
+    through = dataclasses.replace(bag.scans[1], ranges=np.asarray(bag.scans[1].ranges) * 3.0,
+                                  range_max=100.0)
+    for k in (1, 2):
+        res = tracker.track(through, odom[k])
+        assert res.status != 'ok' and 'holding' not in res.message, res.message
+    assert tracker.lost
+
+
 def test_set_prior_rejects_bad_input(track_bag):
     tracker = Tracker(track_bag[4])
     with pytest.raises(ValueError, match='finite'):
