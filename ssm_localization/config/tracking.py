@@ -98,7 +98,9 @@ class TrackerConfig:
         0.1, 'a scan with too few returns to track (an open space, a short-range laser) is '
         'ray-cast at the prediction: when at most this fraction of its beams disagrees with the '
         'map (no return where a wall is in range, a return through a wall) the track coasts on '
-        'the odometry; otherwise the scan counts as a miss')
+        'the odometry; otherwise the scan counts as a miss. The same test holds the track '
+        '(ambiguous, no miss) through a scan that fits nowhere, its returns short of the walls '
+        '(clutter)')
 
     def __post_init__(self) -> None:
         names = [f.name for f in fields(self)]
