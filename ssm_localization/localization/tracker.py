@@ -60,6 +60,7 @@ from .localizer import (AMBIGUOUS, distinct, FAILED, GlobalLocalizer, Hypothesis
                         OK, position_std, Query, SparseScan, Status, STATUSES)
 from .motion import check_pose, Increment, predict_parts
 from .noise import NoiseScale
+from .verify import BeamCheck
 from ..config.confidence import ConfidenceModel, TRACK_CONFIDENCE_MODEL
 from ..config.tracking import TrackerConfig
 from ..transforms import apply, Pose2, wrap_angle
@@ -437,8 +438,7 @@ class Tracker:
         """
         cfg = self.config
         why = f'{note}{sparse}'
-        check = self.localizer.check_at(pred, sparse)
-        disagree = (check.missing + check.through) / max(check.beams, 1)
+        check, disagree = self._disagreement(pred, sparse)
         common = {'covariance': pred_cov, 'predicted': pred, 'mode': TRACKED}
         if disagree > cfg.coast_disagreement:
             self._miss()
@@ -451,11 +451,25 @@ class Tracker:
             return self._result(t0, stamp, FAILED, pred, f'bad scan: {why}, and not one beam '
                                 'measured anything (NaN or outside [range_min, range_max])',
                                 **common)
-        conf = self._confidence * within_right(pred_cov)
+        conf = self._carried_confidence(pred_cov)
         status = OK if conf >= cfg.min_confidence else AMBIGUOUS
         return self._result(t0, stamp, status, pred, f'{why}: coasting on odometry, the map '
                             f'agrees with {1.0 - disagree:.0%} of its beams, confidence '
                             f'{conf:.3f}', confidence=conf, **common)
+
+    def _disagreement(self, pred: Pose2, scan: SparseScan | Query) -> tuple[BeamCheck, float]:
+        """
+        Ray-cast a scan at the prediction; return the check and the fraction that disagrees.
+
+        Disagreeing: a return through a wall, or no return where a wall is within range (what
+        :meth:`_coast` and :meth:`_hold` ask before carrying the prediction over a scan).
+        """
+        check = self.localizer.check_at(pred, scan)
+        return check, (check.missing + check.through) / max(check.beams, 1)
+
+    def _carried_confidence(self, pred_cov: np.ndarray) -> float:
+        """Return the last verified pose's confidence times P(the odometry kept it right)."""
+        return self._confidence * within_right(pred_cov)
 
     def _keep(self, t0: float, stamp: float, attempt: _Attempt, pred: Pose2, message: str,
               glob: Localization | None = None) -> TrackResult:
@@ -536,11 +550,10 @@ class Tracker:
         the track is not held any longer (None: a miss).
         """
         cfg = self.config
-        conf = self._confidence * within_right(pred_cov)
+        conf = self._carried_confidence(pred_cov)
         if conf < cfg.lost_confidence:
             return None
-        check = self.localizer.check_at(pred, query)
-        disagree = (check.missing + check.through) / max(check.beams, 1)
+        _, disagree = self._disagreement(pred, query)
         if disagree > cfg.coast_disagreement:
             return None
         return self._result(t0, stamp, AMBIGUOUS, pred, f'{why}global localization '
