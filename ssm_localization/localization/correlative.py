@@ -31,6 +31,10 @@ from ..transforms import wrap_angle
 
 #: likelihood values are stored as uint8 (0..255)
 _SCALE = 255.0
+#: the search expands the best windows of its pool, about this many batches of them, before it
+#: looks at the rest again
+_HOT_BATCHES = 4
+_EMPTY_POOL = (np.zeros(0, np.int64),) * 3 + (np.zeros(0, np.int8), np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -223,11 +227,36 @@ class CorrelativeGrid:
 
         leaves: list[np.ndarray] = []
         complete = True
-        while len(k):
+        # The pool in two parts: `hot`, the windows whose bound is at least `cut`, is expanded
+        # batch by batch; `cold` (the rest, and children below `cut`) waits until `hot` is empty
+        # and is then pruned and split again. Each step so works on a few batches' windows, not
+        # on the whole pool (up to 10^5 windows on a campus-scale map).
+        cold = [(k, r, c, lev, ub)]
+        hot = _EMPTY_POOL
+        cut = -math.inf
+        while True:
+            if not len(hot[0]):
+                if not cold:
+                    break
+                k, r, c, lev, ub = (np.concatenate(a) for a in zip(*cold))
+                keep = ub >= bound(r, c)
+                k, r, c, lev, ub = k[keep], r[keep], c[keep], lev[keep], ub[keep]
+                if not len(k):
+                    break
+                if len(k) > _HOT_BATCHES * batch:
+                    cut = float(np.partition(ub, len(ub) - _HOT_BATCHES * batch)
+                                [len(ub) - _HOT_BATCHES * batch])
+                    up = ub >= cut
+                    hot = (k[up], r[up], c[up], lev[up], ub[up])
+                    cold = [(k[~up], r[~up], c[~up], lev[~up], ub[~up])]
+                else:
+                    hot, cold, cut = (k, r, c, lev, ub), [], -math.inf
+            k, r, c, lev, ub = hot
             keep = ub >= bound(r, c)
             k, r, c, lev, ub = k[keep], r[keep], c[keep], lev[keep], ub[keep]
             if not len(k):
-                break
+                hot = _EMPTY_POOL
+                continue
             if budget_s is not None and time.perf_counter() - t0 > budget_s:
                 complete = False
                 break
@@ -258,14 +287,18 @@ class CorrelativeGrid:
                         if labels is not None:
                             np.maximum.at(best_r, region(cr[good], cc_[good]), sc[good])
                 else:
-                    new.append((ck, cr, cc_, np.full(len(ck), level - 1, np.int8), sc))
-            k, r, c, lev, ub = (np.concatenate(a) for a in zip(*new))
+                    up = sc >= cut
+                    child = (ck, cr, cc_, np.full(len(ck), level - 1, np.int8), sc)
+                    new.append(tuple(a[up] for a in child))
+                    cold.append(tuple(a[~up] for a in child))
+            hot = tuple(np.concatenate(a) for a in zip(*new))
         if not leaves:
             return _empty(complete)
         lv = np.concatenate(leaves)
         rows_, cols_ = lv[:, 1].astype(np.int64), lv[:, 2].astype(np.int64)
         lv = lv[lv[:, 3] >= bound(rows_, cols_)]
-        order = np.argsort(-lv[:, 3], kind='stable')
+        # best first; ties by yaw, row and column, not by when the search found them
+        order = np.lexsort((lv[:, 2], lv[:, 1], lv[:, 0], -lv[:, 3]))
         if labels is None:
             lv = lv[order[:max_leaves]]
             leaf_regions = None

@@ -84,6 +84,19 @@ def test_ratio_returns_every_leaf_within_it(grid):
     assert (np.diff(found.scores) <= 0).all()                     # best first
 
 
+def test_small_batches_find_the_same_leaves(grid):
+    """A pool larger than the few batches the search works on at a time loses no leaf."""
+    occ_map = _rooms()
+    yaw0 = occ_map.origin[2] + 0.2
+    pts = _scan_from(occ_map, _cell_centre_pose(occ_map, 20, 40, yaw0))
+    yaws = yaw0 + np.radians([-1.0, 0.0, 1.0])
+    whole = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    small = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6, batch=3)
+    _, scores = _brute_force(grid, occ_map, pts, yaws)
+    assert len(small.scores) == len(whole.scores) == (scores >= 0.7 * scores.max()).sum()
+    assert np.array_equal(small.poses, whole.poses) and np.array_equal(small.scores, whole.scores)
+
+
 def test_window_and_yaws_restrict_the_search(grid):
     occ_map = _rooms()
     yaw0 = occ_map.origin[2] + 1.0
