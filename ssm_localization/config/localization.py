@@ -39,6 +39,8 @@ class LocalizerConfig:
                                          'no pose is kept')
     search_ratio: float = param(0.95, 'keep search leaves within this ratio of the best one')
     search_keep: int = param(4, 'distinct search leaves added as hypotheses')
+    search_rivals: int = param(8, 'after a search of several regions (a campus): further leaves, '
+                                  'each another place, added as the rivals of the answer')
     search_depth: int = param(5, 'levels of the branch and bound (top windows 2^depth cells)')
     search_sigma: float = param(0.1, 'width of the correlative likelihood, metres')
     search_cell: float = param(0.05, 'cell size of the search, metres (rounded to a whole number '
@@ -117,7 +119,7 @@ class LocalizerConfig:
                     'distinct_xy', 'distinct_yaw', 'max_position_std', 'covariance_scale',
                     'sigma_d')
         nonnegative = ('vote_descriptor_dims', 'search_spread', 'search_alignments',
-                       'search_max_cells',
+                       'search_rivals', 'search_max_cells',
                        'refine_iterations', 'polish_iterations', 'surface_depth',
                        'search_min_score', 'contradiction_weight', 'max_contradicting',
                        'min_score', 'verify_margin', 'ambiguity_margin', 'min_position_std',

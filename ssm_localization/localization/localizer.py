@@ -464,7 +464,7 @@ class GlobalLocalizer:
         return [Hypothesis(source='search', initial_pose=tuple(float(v) for v in found.poses[i]),
                            correlative=float(found.scores[i]))
                 for i in pick_leaves(found, cfg.search_keep, lambda a, b: not distinct(
-                    a, b, cfg.vote_bin_xy, cfg.search_step * 3))]
+                    a, b, cfg.vote_bin_xy, cfg.search_step * 3), cfg.search_rivals)]
 
     def search_plan(self, query: Query, seeds: list[Pose2]) -> SearchPlan:
         """

@@ -216,15 +216,17 @@ def _to_windows(origin: Pose2, window: float, xy: np.ndarray) -> np.ndarray:
 
 
 def pick_leaves(found: CorrelativeResult, keep: int,
-                same: Callable[[Pose2, Pose2], bool]) -> list[int]:
+                same: Callable[[Pose2, Pose2], bool], rivals: int | None = None) -> list[int]:
     """
     Return the leaves of a search to turn into hypotheses, best first.
 
     The first ``keep`` leaves that are not the ``same`` place as one taken before. After a
     regional search (``found.regions``) also the best such leaf of every region not yet among
-    them, and up to ``keep`` leaves more than :data:`PLACE_APART` from every leaf taken (other
-    rooms that look alike: the rivals that tell whether the answer is unique).
+    them, and up to ``rivals`` (default ``keep``) leaves more than :data:`PLACE_APART` from
+    every leaf taken (other rooms that look alike: the rivals that tell whether the answer is
+    unique).
     """
+    rivals = keep if rivals is None else rivals
     out: list[int] = []
     poses: list[Pose2] = []
     taken: set[int] = set()
@@ -237,7 +239,7 @@ def pick_leaves(found: CorrelativeResult, keep: int,
         if any(same(pose, p) for p in poses):
             continue
         if len(out) >= keep and region in taken:
-            if others >= keep or any(math.hypot(pose[0] - p[0], pose[1] - p[1]) <= PLACE_APART
+            if others >= rivals or any(math.hypot(pose[0] - p[0], pose[1] - p[1]) <= PLACE_APART
                                      for p in poses):
                 continue
             others += 1

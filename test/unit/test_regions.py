@@ -103,6 +103,12 @@ def test_leaves_and_refinement_keep_each_regions_best():
     regional = CorrelativeResult(poses, np.linspace(1, 0.5, 6), True,
                                  regions=np.array([0, 0, 0, 1, 1, 2]))
     assert pick_leaves(regional, 2, same) == [0, 2, 3, 4, 5]     # 4: another place
+    assert pick_leaves(regional, 2, same, rivals=0) == [0, 2, 3, 5]
+    # rivals: other places of one region, as many as asked for
+    apart = CorrelativeResult(np.array([[10.0 * i, 0, 0] for i in range(6)]),
+                              np.linspace(1, 0.5, 6), True, regions=np.zeros(6, int))
+    assert pick_leaves(apart, 1, same) == [0, 1]
+    assert pick_leaves(apart, 1, same, rivals=3) == [0, 1, 2, 3]
 
     class Regions:
         count = 3
