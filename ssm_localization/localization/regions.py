@@ -239,8 +239,8 @@ def pick_leaves(found: CorrelativeResult, keep: int,
         if any(same(pose, p) for p in poses):
             continue
         if len(out) >= keep and region in taken:
-            if others >= rivals or any(math.hypot(pose[0] - p[0], pose[1] - p[1]) <= PLACE_APART
-                                     for p in poses):
+            if others >= rivals or any(
+                    math.hypot(pose[0] - p[0], pose[1] - p[1]) <= PLACE_APART for p in poses):
                 continue
             others += 1
         out.append(i)
