@@ -28,6 +28,8 @@ class LocalizerConfig:
     top_n: int = param(10, 'peaks kept by the spectral coarse ranking (eq. 5) for the RANSAC '
                            'fine pose; paper mode: nodes kept (paper: N = 5)')
     fine_ransac_iterations: int = param(60, '2-point RANSAC draws per peak (eqs. 7-8)')
+    fine_min_inliers: int = param(6, 'RANSAC inliers a peak needs to become a pose hypothesis '
+                                     '(the refinement and the ray check judge it from there)')
     # -- correlative search over the whole map at the hypotheses' yaws
     search: bool = param(True, 'branch-and-bound correlative search over the whole map at the '
                                'yaws of the best hypotheses and their flips')
@@ -111,7 +113,8 @@ class LocalizerConfig:
 
     def __post_init__(self) -> None:
         positive = ('vote_neighbours', 'vote_bin_xy', 'vote_bin_yaw', 'vote_peaks', 'top_n',
-                    'fine_ransac_iterations', 'search_seeds', 'search_step', 'search_keep',
+                    'fine_ransac_iterations', 'fine_min_inliers', 'search_seeds', 'search_step',
+                    'search_keep',
                     'search_depth', 'search_sigma', 'search_cell', 'search_budget',
                     'search_points',
                     'verify_beams', 'refine_hypotheses', 'verify_hypotheses', 'max_cast_range',

@@ -414,7 +414,7 @@ class GlobalLocalizer:
             found = ransac_hypotheses(self.voting.points[mj], feats.points[qi],
                                       mc.ransac_threshold, cfg.fine_ransac_iterations, rng,
                                       mc.ransac_min_span)
-            if not found or found[0][1].sum() < mc.min_inliers:
+            if not found or found[0][1].sum() < cfg.fine_min_inliers:
                 continue
             pose, inliers = found[0]
             node = int(np.bincount(self.voting.nodes[mj[inliers]]).argmax())

@@ -141,6 +141,17 @@ def test_spectral_hypotheses_are_ranked_peaks_matched_by_ransac(depot, localizer
     assert min(_err(localizer.base_pose(h.initial_pose), _truth(depot))[0] for h in hyps) < 0.2
 
 
+def test_a_peak_becomes_a_hypothesis_with_fine_min_inliers_ransac_inliers(depot, localizer,
+                                                                          query):
+    """Peaks whose RANSAC pose has fewer inliers than ``fine_min_inliers`` give no hypothesis."""
+    few = len(localizer.spectral_hypotheses(query))
+    strict = GlobalLocalizer(depot[1], dataclasses.replace(localizer.config,
+                                                           fine_min_inliers=10 ** 6))
+    assert strict.spectral_hypotheses(query) == []
+    loose = GlobalLocalizer(depot[1], dataclasses.replace(localizer.config, fine_min_inliers=2))
+    assert len(loose.spectral_hypotheses(query)) >= few >= 1
+
+
 def test_search_at_the_true_yaw_finds_the_place(depot, localizer, query):
     truth = _truth(depot)
     found = localizer.search_hypotheses(query, np.array([truth[2]]))
