@@ -43,7 +43,7 @@ class LocalizerConfig:
     search_keep: int = param(4, 'distinct search leaves added as hypotheses')
     search_rivals: int = param(8, 'after a search of several regions (a campus): further leaves, '
                                   'each another place, added as the rivals of the answer')
-    search_depth: int = param(5, 'levels of the branch and bound (top windows 2^depth cells)')
+    search_depth: int = param(4, 'levels of the branch and bound (top windows 2^depth cells)')
     search_sigma: float = param(0.1, 'width of the correlative likelihood, metres')
     search_cell: float = param(0.05, 'cell size of the search, metres (rounded to a whole number '
                                      'of map cells, at least one)')

@@ -84,6 +84,20 @@ def test_ratio_returns_every_leaf_within_it(grid):
     assert (np.diff(found.scores) <= 0).all()                     # best first
 
 
+@pytest.mark.parametrize('depth', [1, 2, 4, 5])
+def test_the_leaves_do_not_depend_on_the_depth(grid, depth):
+    """The levels only bound: however many there are, the search finds the same leaves."""
+    occ_map = _rooms()
+    yaw0 = occ_map.origin[2] - 0.3
+    pts = _scan_from(occ_map, _cell_centre_pose(occ_map, 25, 10, yaw0))
+    yaws = yaw0 + np.radians([-1.0, 0.0, 1.0])
+    other = CorrelativeGrid(occ_map, depth=depth, sigma=0.1, max_range=10.0)
+    ref = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.75, max_leaves=10 ** 6)
+    found = other.search(pts, yaws=yaws, min_score=0.3, ratio=0.75, max_leaves=10 ** 6)
+    assert len(ref.scores) > 10 and ref.complete and found.complete
+    assert np.array_equal(found.poses, ref.poses) and np.array_equal(found.scores, ref.scores)
+
+
 def test_small_batches_find_the_same_leaves(grid):
     """A pool larger than the few batches the search works on at a time loses no leaf."""
     occ_map = _rooms()
