@@ -34,6 +34,9 @@ _SCALE = 255.0
 #: the search expands the best windows of its pool, about this many batches of them, before it
 #: looks at the rest again
 _HOT_BATCHES = 4
+#: windows scored at a time, so that their cell indices (8 bytes per window and point) stay in
+#: the cache; of 1024-32768 on the campus's captured searches 8192 was the fastest
+_SCORE_CHUNK = 8192
 _EMPTY_POOL = (np.zeros(0, np.int64),) * 3 + (np.zeros(0, np.int8), np.zeros(0))
 
 
@@ -369,12 +372,17 @@ class CorrelativeGrid:
         # windows of this level are anchored at multiples of 2^level (see _base)
         cell = ((np.asarray(r) + self._top) * self._wp
                 + ((np.asarray(c) + self._left) >> level))
-        flat = np.take(base, k, axis=0)         # (M, N) cells of the points; take and an
-        flat += cell[:, None]                   # in-place add: a quarter faster than indexing
-        # points above or below the padded grid fall off the flat array: its first and last
-        # cells are padding (0)
-        return np.take(self._levels[level], flat, mode='clip').sum(axis=1,
-                                                                   dtype=np.int32) * norm
+        grid, k = self._levels[level], np.asarray(k)
+        out = np.empty(len(k), np.int32)
+        # in chunks of windows whose (chunk, N) cell indices stay in the cache
+        for i in range(0, len(k), _SCORE_CHUNK):
+            flat = np.take(base, k[i:i + _SCORE_CHUNK], axis=0)  # cells of the points: take
+            flat += cell[i:i + _SCORE_CHUNK, None]               # and an in-place add
+            # points above or below the padded grid fall off the flat array: its first and
+            # last cells are padding (0)
+            np.take(grid, flat, mode='clip').sum(axis=1, dtype=np.int32,
+                                                 out=out[i:i + _SCORE_CHUNK])
+        return out * norm
 
     def _flat(self, r, c):
         """Flat index of map cells ``(r, c)`` (may lie in the padding) in the level grids."""

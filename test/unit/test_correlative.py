@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 from ssm_localization.config.localization import LocalizerConfig
+from ssm_localization.localization import correlative
 from ssm_localization.localization.correlative import CorrelativeGrid, likelihood_grid
 from ssm_localization.localization.map_layers import search_coarsening
 from ssm_localization.mapping.map_io import OccupancyMap
@@ -96,6 +97,20 @@ def test_the_leaves_do_not_depend_on_the_depth(grid, depth):
     found = other.search(pts, yaws=yaws, min_score=0.3, ratio=0.75, max_leaves=10 ** 6)
     assert len(ref.scores) > 10 and ref.complete and found.complete
     assert np.array_equal(found.poses, ref.poses) and np.array_equal(found.scores, ref.scores)
+
+
+def test_windows_scored_in_chunks_score_the_same(grid, monkeypatch):
+    """The windows of a level are scored a chunk at a time: chunk edges change nothing."""
+    occ_map = _rooms()
+    yaw0 = occ_map.origin[2] + 0.1
+    pts = _scan_from(occ_map, _cell_centre_pose(occ_map, 15, 45, yaw0))
+    yaws = yaw0 + np.radians([-1.0, 0.0, 1.0])
+    whole = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    monkeypatch.setattr(correlative, '_SCORE_CHUNK', 7)
+    chunked = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    assert len(whole.scores) > 10
+    assert np.array_equal(chunked.poses, whole.poses)
+    assert np.array_equal(chunked.scores, whole.scores)
 
 
 def test_small_batches_find_the_same_leaves(grid):
