@@ -205,9 +205,7 @@ class CorrelativeGrid:
             c = np.tile(cc, n_k)
         else:
             labels, allowed = regions
-            lab = labels[rr >> self.depth, cc >> self.depth]
-            pick = (lab >= 0)[None, :] & allowed[:, np.maximum(lab, 0)]
-            k, at = np.nonzero(pick)                # yaw-major, as above
+            k, at = _allowed_windows(labels[rr >> self.depth, cc >> self.depth], allowed)
             r, c = rr[at], cc[at]
         ub = self._score(self.depth, base(self.depth), k, r, c, norm)
         lev = np.full(len(k), self.depth, np.int8)
@@ -463,6 +461,24 @@ def _window_max(grid: np.ndarray, s: int) -> np.ndarray:
     out2 = out.copy()
     np.maximum(out2[:, :-s], out[:, s:], out=out2[:, :-s])
     return out2
+
+
+def _allowed_windows(lab: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return ``(k, at)``: each yaw ``k`` with each window ``at`` of a region it is allowed in.
+
+    ``lab`` (W,) the region of each window (-1: none), ``allowed`` (K, R). Yaw-major, the windows
+    of each region in their order; built from the (yaw, region) pairs, so the cost is that of
+    the output, not of every yaw times every window.
+    """
+    inside = np.flatnonzero(lab >= 0)
+    order = inside[np.argsort(lab[inside], kind='stable')]       # windows grouped by region
+    count = np.bincount(lab[inside], minlength=allowed.shape[1])
+    start = np.cumsum(count) - count
+    pk, pr = np.nonzero(allowed)                                 # (yaw, region) pairs
+    sizes = count[pr]
+    first = np.repeat(start[pr] - (np.cumsum(sizes) - sizes), sizes)
+    return np.repeat(pk, sizes), order[first + np.arange(int(sizes.sum()))]
 
 
 def _empty(complete: bool = True) -> CorrelativeResult:

@@ -113,6 +113,19 @@ def test_windows_scored_in_chunks_score_the_same(grid, monkeypatch):
     assert np.array_equal(chunked.scores, whole.scores)
 
 
+def test_allowed_windows_pair_each_yaw_with_the_windows_of_its_regions():
+    rng = np.random.default_rng(3)
+    lab = rng.integers(-1, 5, 300)
+    allowed = rng.random((7, 5)) < 0.3
+    allowed[2] = False                                         # a yaw allowed nowhere
+    k, at = correlative._allowed_windows(lab, allowed)
+    want = {(y, w) for y in range(7) for w in range(300) if lab[w] >= 0 and allowed[y, lab[w]]}
+    assert len(k) == len(want) and set(zip(k.tolist(), at.tolist())) == want
+    assert (np.diff(k) >= 0).all()                             # yaw-major
+    none = correlative._allowed_windows(np.full(4, -1), allowed)
+    assert len(none[0]) == len(none[1]) == 0
+
+
 def test_small_batches_find_the_same_leaves(grid):
     """A pool larger than the few batches the search works on at a time loses no leaf."""
     occ_map = _rooms()
