@@ -114,8 +114,7 @@ class LocalizerConfig:
     def __post_init__(self) -> None:
         positive = ('vote_neighbours', 'vote_bin_xy', 'vote_bin_yaw', 'vote_peaks', 'top_n',
                     'fine_ransac_iterations', 'fine_min_inliers', 'search_seeds', 'search_step',
-                    'search_keep',
-                    'search_depth', 'search_sigma', 'search_cell', 'search_budget',
+                    'search_keep', 'search_depth', 'search_sigma', 'search_cell', 'search_budget',
                     'search_points',
                     'verify_beams', 'refine_hypotheses', 'verify_hypotheses', 'max_cast_range',
                     'surface_depth_std', 'beam_tolerance', 'score_sigma',

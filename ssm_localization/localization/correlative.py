@@ -228,6 +228,12 @@ class CorrelativeGrid:
 
         leaves: list[np.ndarray] = []
         complete = True
+
+        def pruned(pool):
+            """Return the windows of ``pool`` whose bound reaches the current one."""
+            keep = pool[4] >= bound(pool[1], pool[2])
+            return tuple(a[keep] for a in pool)
+
         # The pool in two parts: `hot`, the windows whose bound is at least `cut`, is expanded
         # batch by batch; `cold` (the rest, and children below `cut`) waits until `hot` is empty
         # and is then pruned and split again. Each step so works on a few batches' windows, not
@@ -236,28 +242,24 @@ class CorrelativeGrid:
         hot = _EMPTY_POOL
         cut = -math.inf
         while True:
-            if not len(hot[0]):
+            if len(hot[0]):
+                k, r, c, lev, ub = pruned(hot)
+                if not len(k):
+                    hot = _EMPTY_POOL
+                    continue
+            else:
                 if not cold:
                     break
-                k, r, c, lev, ub = (np.concatenate(a) for a in zip(*cold))
-                keep = ub >= bound(r, c)
-                k, r, c, lev, ub = k[keep], r[keep], c[keep], lev[keep], ub[keep]
+                k, r, c, lev, ub = pruned(tuple(np.concatenate(a) for a in zip(*cold)))
                 if not len(k):
                     break
+                cold, cut = [], -math.inf
                 if len(k) > _HOT_BATCHES * batch:
                     cut = float(np.partition(ub, len(ub) - _HOT_BATCHES * batch)
                                 [len(ub) - _HOT_BATCHES * batch])
                     up = ub >= cut
-                    hot = (k[up], r[up], c[up], lev[up], ub[up])
                     cold = [(k[~up], r[~up], c[~up], lev[~up], ub[~up])]
-                else:
-                    hot, cold, cut = (k, r, c, lev, ub), [], -math.inf
-            k, r, c, lev, ub = hot
-            keep = ub >= bound(r, c)
-            k, r, c, lev, ub = k[keep], r[keep], c[keep], lev[keep], ub[keep]
-            if not len(k):
-                hot = _EMPTY_POOL
-                continue
+                    k, r, c, lev, ub = k[up], r[up], c[up], lev[up], ub[up]
             if budget_s is not None and time.perf_counter() - t0 > budget_s:
                 complete = False
                 break
