@@ -97,6 +97,9 @@ class LocalizerConfig:
     max_position_std: float = param(0.25, 'a larger reported position std along the weakest '
                                           'direction: ambiguous (2 sigma beyond the 0.5 m '
                                           'success tolerance: a corridor too bare to tell), m')
+    min_scan_extent: float = param(1.0, 'a scan whose spatially even points lie within this '
+                                        'of the sensor (90th percentile of their range) sees '
+                                        'too little to tell places apart: ambiguous, metres')
     covariance_scale: float = param(100.0, 'Gauss-Newton covariance multiplier (neighbouring '
                                            'residuals are correlated)')
     min_position_std: float = param(0.04, 'floor of the reported position std, metres')
@@ -118,7 +121,8 @@ class LocalizerConfig:
                     'search_points',
                     'verify_beams', 'refine_hypotheses', 'verify_hypotheses', 'max_cast_range',
                     'surface_depth_std', 'beam_tolerance', 'score_sigma',
-                    'distinct_xy', 'distinct_yaw', 'max_position_std', 'covariance_scale',
+                    'distinct_xy', 'distinct_yaw', 'max_position_std', 'min_scan_extent',
+                    'covariance_scale',
                     'sigma_d')
         nonnegative = ('vote_descriptor_dims', 'search_spread', 'search_alignments',
                        'search_rivals', 'search_max_cells',

@@ -76,7 +76,7 @@ class CorrelativeGrid:
     """
 
     def __init__(self, occ_map: OccupancyMap, *, occupied_thresh: int = 65, free_thresh: int = 25,
-                 sigma: float = 0.1, depth: int = 6, max_range: float = 30.0,
+                 sigma: float = 0.1, depth: int = 4, max_range: float = 30.0,
                  coarsen: int = 1) -> None:
         if depth < 1 or coarsen < 1:
             raise ValueError(f'CorrelativeGrid: depth and coarsen must be >= 1, got {depth}, '

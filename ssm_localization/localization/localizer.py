@@ -21,8 +21,9 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
    pose explains;
 7. verification (``verify.py``): ray casting; beams seeing through walls count against a pose;
 8. the answer: ``failed`` when the best pose explains too little of the scan, ``ambiguous`` when a
-   distinct pose scores within ``ambiguity_margin`` or the geometry leaves the position
-   undetermined beyond ``max_position_std``; otherwise the evidence of the pose (``evidence.py``,
+   distinct pose scores within ``ambiguity_margin``, the geometry leaves the position
+   undetermined beyond ``max_position_std`` or the scan sees nothing beyond
+   ``min_scan_extent``; otherwise the evidence of the pose (``evidence.py``,
    the margin measured against the best distinct rival, ray-cast for it) gives the calibrated
    confidence ``P(right | evidence)`` (``confidence.py``): ``ok`` from ``min_confidence``, else
    ``ambiguous`` or (below one half) ``failed``; the covariance is the Gauss-Newton one, scaled
@@ -788,7 +789,9 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence |
     walls, or explains too little of the scan (score below ``min_score``);
     ``ambiguous`` when a distinct pose scores within ``ambiguity_margin`` of it (the covariance
     then spans them) or when its position is undetermined beyond ``max_position_std`` along some
-    direction (2 sigma beyond the 0.5 m success tolerance: a bare corridor).
+    direction (2 sigma beyond the 0.5 m success tolerance: a bare corridor), or when the scan
+    sees too little to tell places apart (its evidence's ``extent`` below ``min_scan_extent``:
+    a wall or a thing right in front of the sensor, whose shape repeats all over a building).
     Then the calibrated ``confidence`` = ``P(right | evidence)`` (``confidence.py``): ``ok`` when
     it reaches ``min_confidence``, else ``ambiguous`` (at least 0.5: more likely right than not)
     or ``failed``. An answer the rules refuse reports the rate at which such answers were right
@@ -822,6 +825,10 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence |
     if std > cfg.max_position_std:
         return AMBIGUOUS, (f'degenerate geometry (e.g. a corridor): position std {std:.2f} m '
                            f'along the weakest direction'), cov, model.refused['degenerate']
+    if evidence is not None and evidence.extent < cfg.min_scan_extent:
+        return AMBIGUOUS, (f'degenerate view: 90 % of the scan lies within '
+                           f'{evidence.extent:.2f} m of the sensor (< {cfg.min_scan_extent} m), '
+                           f'too little to tell places apart'), cov, model.refused['degenerate']
     conf = confidence(evidence, model)
     facts = (f'explained {best.explained:.0%}, through walls {best.contradicting:.0%}, '
              f'position std {std * 1e3:.0f} mm, confidence {conf:.3f}')
