@@ -8,8 +8,9 @@ from .fields import check_numbers, param
 
 #: fields that must be > 0 (the rest must be >= 0); tuples are checked element by element
 _POSITIVE = {'min_step_std', 'no_odom_std', 'max_odom_step', 'window_sigmas', 'window_xy',
-             'window_yaw', 'yaw_step', 'gate_chi2', 'weak_std', 'max_position_std', 'rival_chi2',
-             'rival_prior_chi2', 'noise_scale_bounds', 'noise_window', 'noise_min_samples'}
+             'window_yaw', 'yaw_step', 'gate_chi2', 'weak_std', 'weak_yaw_std', 'max_position_std',
+             'rival_chi2', 'rival_prior_chi2', 'noise_scale_bounds', 'noise_window',
+             'noise_min_samples'}
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,9 @@ class TrackerConfig:
     weak_std: float = param(
         0.1, "position directions along which the scan's std exceeds this (a corridor's axis) "
         'take the prediction in, metres')
+    weak_yaw_std: float = param(
+        math.radians(5.0), "a scan's yaw std above this (a few short returns that hardly turn "
+        'the pose) takes the prediction in along the yaw too, rad')
     # -- decisions
     min_score: float = param(
         0.4, 'a tracked pose scoring less (explained fraction minus the through-wall penalty) '

@@ -9,6 +9,9 @@ others (a corridor's axis); its covariance says which. Odometry, on the other ha
 more than its model admits (wheel slip, a bump). So the prediction is fused only along the weak
 directions of the scan's position covariance (``fuse_weak``): there it is the better estimate;
 elsewhere the scan is, and mixing in a biased prediction would only pull the pose off the walls.
+The same holds for the yaw: a few short returns (a short-range laser in a hall) can leave it
+undetermined by more than a right pose may be off (5 deg), and there the odometry's yaw, carried
+over one scan, is the better estimate.
 """
 from __future__ import annotations
 
@@ -49,25 +52,31 @@ def weak_directions(cov: np.ndarray, weak_std: float) -> np.ndarray:
 
 
 def fuse_weak(scan: Pose2, scan_cov: np.ndarray, pred: Pose2, pred_cov: np.ndarray,
-              weak_std: float) -> tuple[Pose2, np.ndarray]:
+              weak_std: float, weak_yaw_std: float = np.inf) -> tuple[Pose2, np.ndarray]:
     """
-    Fuse the prediction into the scan's pose along the scan's weak position directions.
+    Fuse the prediction into the scan's pose along the scan's weak directions.
 
-    Along each direction ``u`` whose scan std exceeds ``weak_std``, the position and its
-    variance are the product of the two Gaussians restricted to ``u`` (information form); the
-    yaw and the other directions stay the scan's. Returns ``(pose, covariance)``.
+    Along each position direction ``u`` whose scan std exceeds ``weak_std``, and along the yaw
+    when its scan std exceeds ``weak_yaw_std`` (a few short returns that hardly turn the pose),
+    the pose and its covariance are the product of the two Gaussians restricted to those
+    directions (information form); the other directions stay the scan's. Returns ``(pose,
+    covariance)``.
     """
     scan_cov = np.asarray(scan_cov, float)
     dirs = weak_directions(scan_cov, weak_std)
-    if dirs.shape[1] == 0:
+    weak_yaw = bool(scan_cov[2, 2] > weak_yaw_std ** 2)
+    if dirs.shape[1] == 0 and not weak_yaw:
         return scan, scan_cov
-    basis = np.zeros((3, dirs.shape[1]))
-    basis[:2] = dirs
+    basis = np.zeros((3, dirs.shape[1] + weak_yaw))
+    basis[:2, :dirs.shape[1]] = dirs
+    if weak_yaw:
+        basis[2, -1] = 1.0
     s = basis.T @ scan_cov @ basis                 # the weak block of each estimate
     p = basis.T @ np.asarray(pred_cov, float) @ basis
     gain = s @ np.linalg.inv(s + p)                # the Kalman gain within the weak subspace
     step = basis @ gain @ (basis.T @ difference(pred, scan))
-    pose = (float(scan[0] + step[0]), float(scan[1] + step[1]), float(scan[2]))
+    pose = (float(scan[0] + step[0]), float(scan[1] + step[1]),
+            float(wrap_angle(scan[2] + step[2])))
     # Joseph form: the gain moves the weak directions only, so it is not the optimal one
     gain3 = basis @ gain
     keep = np.eye(3) - gain3 @ basis.T

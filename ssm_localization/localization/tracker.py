@@ -13,8 +13,8 @@ Per scan (``Tracker.track``):
    (``GlobalLocalizer.verify``) and the best score wins;
 4. fuse: the winner is fused with the prediction in information form (``fusion.py``), which
    keeps the scan where its walls pin the pose down and the prediction along what they leave
-   free (a corridor's axis; ``weak_std``); the fused pose is scored and ray-cast again, so every
-   reported pose is one that was verified;
+   free (a corridor's axis, ``weak_std``; the yaw of a few short returns, ``weak_yaw_std``); the
+   fused pose is scored and ray-cast again, so every reported pose is one that was verified;
 5. decide: ``ok`` when the verified score is at least ``min_score`` with at most the
    localizer's ``max_contradicting`` of the beams through walls, the fused position std is at
    most ``max_position_std`` and no rival in the window, distinct (the localizer's
@@ -301,7 +301,8 @@ class Tracker:
         contenders = [(h, self._prior_m2(h, pred, pred_cov)) for h in verified
                       if self._plausible(h) and h.score >= top.score - cfg.rival_margin]
         best, best_m2 = min(contenders, key=lambda c: c[1])
-        pose, cov = fuse_weak(best.pose, best.covariance, pred, pred_cov, cfg.weak_std)
+        pose, cov = fuse_weak(best.pose, best.covariance, pred, pred_cov, cfg.weak_std,
+                              cfg.weak_yaw_std)
         fused = self._verified(query, best, pose)
         if not self._plausible(fused):
             fused, pose, cov = best, best.pose, best.covariance     # the scan's own pose

@@ -388,6 +388,23 @@ def test_fusion_keeps_the_scan_where_it_is_sure_and_the_prediction_elsewhere():
     assert mahalanobis2((1.0, 0.0, 0.0), (0.0, 0.0, 0.0), np.eye(3)) == pytest.approx(1.0)
 
 
+def test_fusion_takes_the_prediction_yaw_when_the_scan_hardly_turns_the_pose():
+    # a few short returns: position known, yaw std 25 deg; the prediction's yaw std 3 deg
+    scan, scan_cov = (5.0, 1.0, 0.3), np.diag([0.05 ** 2, 0.05 ** 2, math.radians(25.0) ** 2])
+    pred, pred_cov = (5.1, 1.1, 0.0), np.diag([0.2 ** 2, 0.2 ** 2, math.radians(3.0) ** 2])
+    pose, cov = fuse_weak(scan, scan_cov, pred, pred_cov, weak_std=0.1,
+                          weak_yaw_std=math.radians(5.0))
+    assert pose[:2] == pytest.approx(scan[:2])                        # position: the scan's
+    assert pose[2] == pytest.approx(0.3 * 3.0 ** 2 / (3.0 ** 2 + 25.0 ** 2), abs=1e-9)
+    assert math.degrees(math.sqrt(cov[2, 2])) == pytest.approx(
+        1.0 / math.sqrt(1 / 25.0 ** 2 + 1 / 3.0 ** 2), rel=1e-6)
+    assert fuse_weak(scan, scan_cov, pred, pred_cov, 0.1)[0] == scan   # yaw not weak by default
+    # across the +-pi seam: the fused yaw is wrapped, between the two
+    yaw = fuse_weak((0.0, 0.0, 3.1), scan_cov, (0.0, 0.0, -3.1), pred_cov, 0.1,
+                    math.radians(5.0))[0][2]
+    assert abs(yaw) > 3.1
+
+
 def test_kidnap_sequence_keeps_the_odometry_going():
     n = 50
     truth = [(0.5 * k, 0.0, 0.0) for k in range(n)]
