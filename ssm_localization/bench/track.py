@@ -167,7 +167,8 @@ def run(args: argparse.Namespace) -> int:
             if odometry:
                 print(f'  odometry noise learnt (scale of the odom_alphas noise): position '
                       f'{noise.position:.2f}, heading {noise.heading:.2f}, from the last '
-                      f'{len(noise)} steps between verified poses', flush=True)
+                      f'{len(noise)} steps between verified poses; covariance factor '
+                      f'{noise.covariance:.2f}', flush=True)
             if odometry and not seq.kidnaps and args.single:
                 print(_single(localizer, seq, rows), flush=True)
             if args.plot_dir:

@@ -9,7 +9,8 @@ from .fields import check_numbers, param
 #: fields that must be > 0 (the rest must be >= 0); tuples are checked element by element
 _POSITIVE = {'min_step_std', 'no_odom_std', 'max_odom_step', 'window_sigmas', 'window_xy',
              'window_yaw', 'yaw_step', 'gate_chi2', 'weak_std', 'weak_yaw_std', 'max_position_std',
-             'rival_chi2', 'rival_prior_chi2', 'noise_scale_bounds', 'noise_window',
+             'rival_chi2', 'rival_prior_chi2', 'noise_scale_bounds', 'carried_covariance_bounds',
+             'noise_window',
              'noise_min_samples'}
 
 
@@ -39,6 +40,12 @@ class TrackerConfig:
         (0.02, 4.0), "bounds of the scales of the odometry's noise (position, heading) that the "
         'tracker learns from the steps between verified poses (localization/noise.py); (1, 1): '
         'the alphas as given')
+    carried_covariance_bounds: tuple[float, float] = param(
+        (0.25, 4.0), "bounds of the factor the tracker learns for its poses' covariance from the "
+        'same steps (the median squared Mahalanobis distance of the scan pose from the '
+        'prediction over its chi-square median), applied when it judges how likely the odometry '
+        'alone kept a pose right (a scan with nothing to verify); (1, 1): the covariance as '
+        'reported')
     noise_window: int = param(50, 'last steps between verified poses the noise scales are '
                                   'learnt from')
     noise_min_samples: int = param(10, 'steps needed before the noise scales move from 1')
@@ -114,6 +121,10 @@ class TrackerConfig:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f'TrackerConfig.{name} must be in [0, 1], got '
                                  f'{getattr(self, name)!r}')
+        lo, hi = self.carried_covariance_bounds
+        if not lo <= 1.0 <= hi:
+            raise ValueError(f'TrackerConfig: carried_covariance_bounds must be (lo, hi) with lo '
+                             f'<= 1 <= hi, got {self.carried_covariance_bounds!r}')
         lo, hi = self.noise_scale_bounds
         if not lo <= 1.0 <= hi or self.noise_min_samples > self.noise_window:
             raise ValueError(f'TrackerConfig: noise_scale_bounds must be (lo, hi) with lo <= 1 <= '

@@ -23,6 +23,14 @@ that was not quite right moves it little); each bounded by ``bounds``, and 1 unt
 covariance: the scales err on the large (safe) side by them. (Their covariances are
 conservative, about twice their errors' spread on the Intel log; counting them in would put the
 innovations on them and the scales too low.)
+
+The same innovations say how conservative the track's own covariance is: with ``S`` the
+prediction's covariance plus the scan pose's, ``d^T S^-1 d`` is chi-square with 3 degrees of
+freedom when both are right. Its median over the window divided by that chi-square's median is
+``covariance`` (bounded by ``covariance_bounds``, 1 until ``min_samples`` steps are in): the
+factor the tracker applies to a pose's covariance when it judges the probability that the
+odometry alone kept the pose right (a scan with nothing to verify). The reported covariances are
+left as they are.
 """
 from __future__ import annotations
 
@@ -35,28 +43,33 @@ from scipy.special import chdtri
 
 from ..transforms import Pose2, wrap_angle
 
-#: the medians of chi-square variables with 2 and 1 degrees of freedom
+#: the medians of chi-square variables with 3, 2 and 1 degrees of freedom
+CHI2_3_MEDIAN = float(chdtri(3, 0.5))
 CHI2_2_MEDIAN = float(chdtri(2, 0.5))
 CHI2_1_MEDIAN = float(chdtri(1, 0.5))
 
 
 @dataclass
 class NoiseScale:
-    """The odometry noise scales (position, heading) and the innovations they come from."""
+    """The odometry noise scales, the track covariance's factor, and their innovations."""
 
     window: int = 50
     min_samples: int = 10
     bounds: tuple[float, float] = (0.02, 4.0)
+    covariance_bounds: tuple[float, float] = (1.0, 1.0)
     position: float = 1.0
     heading: float = 1.0
+    covariance: float = 1.0
     _steps: deque = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         lo, hi = self.bounds
+        clo, chi = self.covariance_bounds
         if not (0.0 < lo <= 1.0 <= hi and math.isfinite(hi)) or self.window < self.min_samples \
-                or self.min_samples < 1:
-            raise ValueError(f'NoiseScale: bounds (lo, hi) with 0 < lo <= 1 <= hi and '
-                             f'1 <= min_samples <= window, got bounds {self.bounds!r}, '
+                or self.min_samples < 1 or not (0.0 < clo <= 1.0 <= chi and math.isfinite(chi)):
+            raise ValueError(f'NoiseScale: bounds and covariance_bounds (lo, hi) with 0 < lo <= '
+                             f'1 <= hi and 1 <= min_samples <= window, got bounds '
+                             f'{self.bounds!r}, covariance_bounds {self.covariance_bounds!r}, '
                              f'window {self.window}, min_samples {self.min_samples}')
         self._steps = deque(maxlen=self.window)
 
@@ -66,20 +79,23 @@ class NoiseScale:
     def reset(self) -> None:
         """Forget every step (a different robot or odometry source)."""
         self._steps.clear()
-        self.position = self.heading = 1.0
+        self.position = self.heading = self.covariance = 1.0
 
     def apply(self, noise: np.ndarray) -> np.ndarray:
         """Return the odometry noise ``noise`` (x, y, yaw covariance) scaled: ``S Q S``."""
         root = np.sqrt([self.position, self.position, self.heading])
         return np.asarray(noise, float) * np.outer(root, root)
 
-    def add(self, measured: Pose2, predicted: Pose2, noise: np.ndarray) -> tuple[float, float]:
+    def add(self, measured: Pose2, predicted: Pose2, noise: np.ndarray,
+            innovation_cov: np.ndarray | None = None) -> tuple[float, float]:
         """
         Add one step and return the new scales ``(position, heading)``.
 
         ``measured``: the scan's own pose; ``predicted``: the prediction from the last verified
-        pose; ``noise``: the odometry's noise of the step (Q, unscaled). A step that is not
-        finite, or whose noise is singular, is left out.
+        pose; ``noise``: the odometry's noise of the step (Q, unscaled); ``innovation_cov``: the
+        prediction's covariance plus the scan pose's (None: the step says nothing about the
+        covariance's factor). A step that is not finite, or whose noise is singular, is left
+        out.
         """
         d = np.array([measured[0] - predicted[0], measured[1] - predicted[1],
                       wrap_angle(measured[2] - predicted[2])], float)
@@ -87,15 +103,37 @@ class NoiseScale:
         if noise.shape == (3, 3) and np.all(np.isfinite(noise)) and np.all(np.isfinite(d)) \
                 and np.linalg.eigvalsh(0.5 * (noise + noise.T)).min() > 0.0:
             xy = float(d[:2] @ np.linalg.solve(noise[:2, :2], d[:2]))
-            self._steps.append((xy, float(d[2] ** 2 / noise[2, 2])))
-            self.position, self.heading = self.estimate()
+            self._steps.append((xy, float(d[2] ** 2 / noise[2, 2]), _nis(d, innovation_cov)))
+            self.position, self.heading, self.covariance = self.estimate()
         return self.position, self.heading
 
-    def estimate(self) -> tuple[float, float]:
-        """Return ``(s_xy, s_yaw)`` of the steps held (1 with fewer than ``min_samples``)."""
+    def estimate(self) -> tuple[float, float, float]:
+        """
+        Return ``(s_xy, s_yaw, covariance)`` of the steps held.
+
+        Each is 1 with fewer than ``min_samples`` steps (for the covariance's factor: steps that
+        gave an innovation covariance).
+        """
         if len(self._steps) < self.min_samples:
-            return 1.0, 1.0
-        xy, yaw = np.median(np.array(self._steps), axis=0)
+            return 1.0, 1.0, 1.0
+        steps = np.array(self._steps)
+        xy, yaw = np.median(steps[:, :2], axis=0)
         lo, hi = self.bounds
+        nis = steps[np.isfinite(steps[:, 2]), 2]
+        cov = 1.0
+        if len(nis) >= self.min_samples:
+            cov = min(max(float(np.median(nis)) / CHI2_3_MEDIAN, self.covariance_bounds[0]),
+                      self.covariance_bounds[1])
         return (min(max(float(xy) / CHI2_2_MEDIAN, lo), hi),
-                min(max(float(yaw) / CHI2_1_MEDIAN, lo), hi))
+                min(max(float(yaw) / CHI2_1_MEDIAN, lo), hi), cov)
+
+
+def _nis(d: np.ndarray, cov: np.ndarray | None) -> float:
+    """Return ``d^T cov^-1 d`` (NaN: no covariance, or one that is not positive definite)."""
+    if cov is None:
+        return math.nan
+    cov = np.asarray(cov, float)
+    if cov.shape != (3, 3) or not np.all(np.isfinite(cov)) \
+            or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0.0:
+        return math.nan
+    return float(d @ np.linalg.solve(cov, d))

@@ -38,9 +38,11 @@ Per scan (``Tracker.track``):
    in front of the walls: visitors, exhibits) is no miss: the prediction is held (``ambiguous``)
    while the odometry keeps it likely right (``_hold``).
 8. coast: a scan with too few returns to track (an open hall seen by a short-range laser) is
-   ray-cast at the prediction; if the map agrees that little is in range there, the prediction
-   is the answer, its confidence the last verified pose's times the probability that the
-   odometry kept it right (``ok`` while that reaches ``min_confidence``); if not, a miss.
+   ray-cast at the prediction; if the map agrees that little is in range there and its few
+   returns do not mostly pass through the map's walls, the prediction is the answer, its
+   confidence the last verified pose's times the probability that the odometry kept it right
+   (the covariance taken with the factor the track's own innovations give it, ``noise.py``;
+   ``ok`` while that reaches ``min_confidence``); if not, a miss.
 Before the first fix every scan is localized globally; ``set_prior`` (``initialpose``) starts a
 track from a given pose, which the next scan verifies like any other prediction.
 """
@@ -124,6 +126,7 @@ class _Attempt:
     confidence: float = 0.0      # P(right | evidence) of the tracked pose
     evidence: Evidence | None = None
     scan_pose: Pose2 | None = None          # the scan's own pose, before the prediction is fused
+    scan_covariance: np.ndarray | None = None   # and its covariance
 
 
 class Tracker:
@@ -151,9 +154,11 @@ class Tracker:
         # the odometry's noise scale, learnt from the steps between verified poses (noise.py)
         self.noise = NoiseScale(window=self.config.noise_window,
                                 min_samples=self.config.noise_min_samples,
-                                bounds=self.config.noise_scale_bounds)
+                                bounds=self.config.noise_scale_bounds,
+                                covariance_bounds=self.config.carried_covariance_bounds)
         self._fresh = False                     # the belief is a pose the last scan verified
-        self._step: tuple | None = None         # (prediction, odometry noise) of this scan
+        # (prediction, odometry noise, prediction's covariance) of this scan
+        self._step: tuple | None = None
 
     # -- state ----------------------------------------------------------------------------------
     @property
@@ -239,7 +244,7 @@ class Tracker:
             pred, carried, noise = predict_parts(self._pose, self._cov, inc, self.config)
             pred_cov = carried + (self.noise.apply(noise) if inc is not None else noise)
             if self._fresh and inc is not None:
-                self._step = (pred, noise)
+                self._step = (pred, noise, pred_cov)
             self._pose, self._cov = pred, pred_cov
         self._fresh = False
         try:
@@ -318,7 +323,8 @@ class Tracker:
         conf = confidence(evidence, self.confidence_model)
         refused = min(conf, 0.5)        # the rules refuse: not more likely right than wrong
         common = {'pose': pose, 'covariance': cov, 'score': fused.score, 'truncated': truncated,
-                  'confidence': conf, 'evidence': evidence, 'scan_pose': best.pose}
+                  'confidence': conf, 'evidence': evidence, 'scan_pose': best.pose,
+                  'scan_covariance': best.covariance}
         rivals = [h for h, m2 in contenders if h is not best
                   and m2 <= best_m2 + cfg.rival_prior_chi2
                   and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)
@@ -424,14 +430,16 @@ class Tracker:
 
         The scan's beams are ray-cast at the prediction. Where the map has no wall within the
         sensor's range either (an open hall seen by a short-range laser), at most
-        ``coast_disagreement`` of them disagreeing, the prediction is the answer: its confidence
-        is the last verified pose's times the probability that the odometry kept it right
-        (:func:`within_right` of the grown covariance), ``ok`` from the tracker's
-        ``min_confidence`` on. Such a scan is no evidence against the track, so it is no miss:
-        the next scan that sees enough is tracked in a window grown with the covariance (and
-        cross-checked against the whole map when the window cannot hold it). Otherwise the
-        scan is evidence against the track: a miss. A scan with no measurement at all (every
-        beam NaN or outside its range) is no evidence either way: ``failed``, no miss.
+        ``coast_disagreement`` of them disagreeing and no more than half of its returns passing
+        through walls (a few returns from behind the map's walls say the prediction is off even
+        when the many empty beams agree), the prediction is the answer: its confidence is the
+        last verified pose's times the probability that the odometry kept it right
+        (:meth:`_carried_confidence`), ``ok`` from the tracker's ``min_confidence`` on. Such a
+        scan is no evidence against the track, so it is no miss: the next scan that sees enough
+        is tracked in a window grown with the covariance (and cross-checked against the whole
+        map when the window cannot hold it). Otherwise the scan is evidence against the track:
+        a miss. A scan with no measurement at all (every beam NaN or outside its range) is no
+        evidence either way: ``failed``, no miss.
 
         With odometry, the prediction's floor (``min_step_std``: odometry and scan stamps out of
         step) is an error of one scan's stamp, not a random walk: over scans the track coasts
@@ -445,6 +453,11 @@ class Tracker:
             self._miss()
             return self._result(t0, stamp, FAILED, pred, f'{why}: {disagree:.0%} of its beams '
                                 'disagree with the map at the prediction', **common)
+        if check.through > check.returns - check.through:
+            self._miss()
+            return self._result(t0, stamp, FAILED, pred, f'{why}: {check.through} of its '
+                                f'{check.returns} returns pass through walls of the map at the '
+                                'prediction', **common)
         if odometry:                 # no update: the stamps' floor goes with the next scan
             xy, yaw = cfg.min_step_std
             self._cov = pred_cov - self.noise.apply(np.diag([xy ** 2, xy ** 2, yaw ** 2]))
@@ -469,8 +482,13 @@ class Tracker:
         return check, (check.missing + check.through) / max(check.beams, 1)
 
     def _carried_confidence(self, pred_cov: np.ndarray) -> float:
-        """Return the last verified pose's confidence times P(the odometry kept it right)."""
-        return self._confidence * within_right(pred_cov)
+        """
+        Return the last verified pose's confidence times P(the odometry kept it right).
+
+        The covariance is taken with the factor the track's own innovations give it
+        (``NoiseScale.covariance``, at most 1): the reported covariances are conservative.
+        """
+        return self._confidence * within_right(self.noise.covariance * pred_cov)
 
     def _keep(self, t0: float, stamp: float, attempt: _Attempt, pred: Pose2, message: str,
               glob: Localization | None = None) -> TrackResult:
@@ -484,7 +502,10 @@ class Tracker:
         self._misses = 0
         if attempt.status == OK:
             if self._step is not None and attempt.scan_pose is not None:
-                self.noise.add(attempt.scan_pose, *self._step)
+                pred_step, noise, pred_cov = self._step
+                self.noise.add(attempt.scan_pose, pred_step, noise,
+                               None if attempt.scan_covariance is None
+                               else pred_cov + attempt.scan_covariance)
             self._pose, self._cov = attempt.pose, attempt.covariance
             self._confidence = attempt.confidence
             self._fresh = True

@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from helpers import find_bag
+from helpers import find_bag, synthetic_map
 import numpy as np
 import pytest
 from ssm_localization import build_index, GlobalLocalizer, read_bag
@@ -236,6 +236,36 @@ def test_a_scan_that_sees_nothing_where_the_map_has_nothing_in_range_coasts(trac
     assert res.mode == 'tracked' and res.ok and _error(res.pose, truth[4])[0] < 0.3, res.message
 
 
+def test_a_scan_whose_few_returns_pass_through_walls_does_not_coast():
+    """
+    A few returns that the map explains coast; the same few from behind the walls are a miss.
+
+    The three-room map's pillar half a metre ahead of a laser of 0.8 m range, every other wall
+    out of its reach: a scan too sparse to track (8 of 90 beams return), nearly all of whose
+    beams agree with the map whatever its few returns say.
+    """
+    loc = GlobalLocalizer(build_index(synthetic_map()))
+    pose = (3.9, 0.45, 0.0)                                  # the pillar spans x 4.4-4.7
+    angles = -math.pi + 2 * math.pi / 90 * np.arange(90)
+    walls = loc.caster.cast(np.array([pose]), angles, 30.0)[0]
+    seen = walls < 0.8
+    assert 5 <= seen.sum() < 10 and np.all(walls[~seen] >= 0.9 * 0.8)
+
+    def scan(ranges, stamp):
+        return ScanRecord.from_ranges(stamp, np.where(seen, ranges, np.inf), angles[0],
+                                      angles[1] - angles[0], range_max=0.8)
+
+    tracker = Tracker(loc, TrackerConfig(max_misses=1))
+    tracker.set_prior(pose)
+    res = tracker.track(scan(walls, 0.0), (0.0, 0.0, 0.0), 0.0)
+    assert 'coasting on odometry' in res.message and res.mode == 'tracked', res.message
+    res = tracker.track(scan(walls + 0.2, 1.0), (0.0, 0.0, 0.0), 1.0)   # from behind the pillar
+    assert res.status == 'failed' and 'pass through walls' in res.message, res.message
+    assert 'coasting' not in res.message and not tracker.lost          # one miss
+    tracker.track(scan(walls + 0.2, 2.0), (0.0, 0.0, 0.0), 2.0)
+    assert tracker.lost
+
+
 def test_a_pose_that_is_not_ok_does_not_move_the_track(track_bag):
     """Only an ok pose becomes the belief; otherwise the next scan is judged by the odometry."""
     bag, odom, truth, _, loc = track_bag
@@ -343,6 +373,39 @@ def test_the_noise_scales_are_learnt_from_the_innovations(true_xy, true_yaw):
     assert len(scale) == scale.window
     assert 0.8 * true_xy <= scale.position <= 2.0 * true_xy
     assert 0.8 * true_yaw <= scale.heading <= 2.0 * true_yaw + 0.02
+
+
+@pytest.mark.parametrize('true_factor, learnt', [(0.3, 0.3), (0.6, 0.6), (0.1, 0.25),
+                                                 (2.0, 2.0), (10.0, 4.0)])
+def test_the_covariance_factor_is_learnt_from_the_innovations(true_factor, learnt):
+    """
+    Innovations spread as ``true_factor`` times their claimed covariance: the factor finds it.
+
+    Within its bounds (0.25, 4); without bounds given it stays 1.
+    """
+    rng = np.random.default_rng(3)
+    cfg = TrackerConfig()
+    pose_cov = np.diag([0.05 ** 2, 0.05 ** 2, math.radians(1.0) ** 2])
+    inc = Increment.between((0.0, 0.0, 0.0), (1.5, 0.2, 0.4))
+    pred, carried, noise = predict_parts((1.0, 2.0, 0.3), pose_cov, inc, cfg)
+    claimed = carried + noise + pose_cov                 # the prediction's plus the scan pose's
+    scale = NoiseScale(covariance_bounds=(0.25, 4.0))
+    plain = NoiseScale()
+    for _ in range(200):
+        err = rng.multivariate_normal(np.zeros(3), true_factor * claimed)
+        scale.add(tuple(np.add(pred, err)), pred, noise, claimed)
+        plain.add(tuple(np.add(pred, err)), pred, noise, claimed)
+    assert scale.covariance == pytest.approx(learnt, rel=0.25)
+    assert plain.covariance == 1.0
+    scale.add(pred, pred, noise, np.full((3, 3), math.nan))   # no covariance: left out of it
+    scale.add(pred, pred, noise)
+    assert scale.covariance == pytest.approx(learnt, rel=0.25)
+    scale.reset()
+    assert scale.covariance == 1.0
+    with pytest.raises(ValueError, match='covariance_bounds'):
+        NoiseScale(covariance_bounds=(0.0, 1.0))
+    with pytest.raises(ValueError, match='carried_covariance_bounds'):
+        TrackerConfig(carried_covariance_bounds=(0.5, 0.9))
 
 
 def test_the_noise_scales_wait_for_samples_and_stay_in_bounds():
