@@ -486,7 +486,8 @@ class Tracker:
         Return the last verified pose's confidence times P(the odometry kept it right).
 
         The covariance is taken with the factor the track's own innovations give it
-        (``NoiseScale.covariance``, at most 1): the reported covariances are conservative.
+        (``NoiseScale.covariance``, within ``carried_covariance_bounds``): the reported
+        covariances are conservative by a factor that differs by robot and building.
         """
         return self._confidence * within_right(self.noise.covariance * pred_cov)
 
