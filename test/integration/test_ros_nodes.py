@@ -285,8 +285,10 @@ def test_localizer_survives_bad_maps_and_reindexes_new_map(ros, capfd):
     res = loc.relocalize(laser_scan_from_record(sim.scans[0]))
     assert res.success, res.message
     assert loc.new_pose().header.frame_id == 'world'
-    assert ros.wait_for(lambda: len(initial) == 1, 5)
-    assert _close(pose_from_msg(initial[0].pose.pose), sim.poses[0])
+    # handed over on initialpose (again every handover_period until AMCL confirms it: with
+    # no AMCL here a slow poll may first see two copies)
+    assert ros.wait_for(lambda: len(initial) >= 1, 5)
+    assert all(_close(pose_from_msg(m.pose.pose), sim.poses[0]) for m in list(initial))
 
     # the same map again: no re-indexing; a changed map: a new localizer swapped in
     loc.publish_map(occ)
