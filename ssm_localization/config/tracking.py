@@ -10,8 +10,7 @@ from .fields import check_numbers, param
 _POSITIVE = {'min_step_std', 'no_odom_std', 'max_odom_step', 'window_sigmas', 'window_xy',
              'window_yaw', 'yaw_step', 'gate_chi2', 'weak_std', 'weak_yaw_std', 'max_position_std',
              'rival_chi2', 'rival_prior_chi2', 'noise_scale_bounds', 'carried_covariance_bounds',
-             'noise_window',
-             'noise_min_samples'}
+             'noise_window', 'noise_min_samples'}
 
 
 @dataclass(frozen=True)
@@ -121,16 +120,14 @@ class TrackerConfig:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f'TrackerConfig.{name} must be in [0, 1], got '
                                  f'{getattr(self, name)!r}')
-        lo, hi = self.carried_covariance_bounds
-        if not lo <= 1.0 <= hi:
-            raise ValueError(f'TrackerConfig: carried_covariance_bounds must be (lo, hi) with lo '
-                             f'<= 1 <= hi, got {self.carried_covariance_bounds!r}')
-        lo, hi = self.noise_scale_bounds
-        if not lo <= 1.0 <= hi or self.noise_min_samples > self.noise_window:
-            raise ValueError(f'TrackerConfig: noise_scale_bounds must be (lo, hi) with lo <= 1 <= '
-                             f'hi and noise_min_samples <= noise_window, got '
-                             f'{self.noise_scale_bounds!r}, {self.noise_min_samples}, '
-                             f'{self.noise_window}')
+        for name in ('noise_scale_bounds', 'carried_covariance_bounds'):
+            lo, hi = getattr(self, name)
+            if not lo <= 1.0 <= hi:
+                raise ValueError(f'TrackerConfig.{name} must be (lo, hi) with lo <= 1 <= hi, got '
+                                 f'{getattr(self, name)!r}')
+        if self.noise_min_samples > self.noise_window:
+            raise ValueError(f'TrackerConfig: noise_min_samples must be at most noise_window, got '
+                             f'{self.noise_min_samples} and {self.noise_window}')
         for name in ('window_xy', 'window_yaw'):
             if getattr(self, name)[0] > getattr(self, name)[1]:
                 raise ValueError(f'TrackerConfig.{name} must be (min, max) with min <= max, got '

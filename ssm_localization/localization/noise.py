@@ -41,7 +41,8 @@ import math
 import numpy as np
 from scipy.special import chdtri
 
-from ..transforms import Pose2, wrap_angle
+from .fusion import difference, mahalanobis2
+from ..transforms import Pose2
 
 #: the medians of chi-square variables with 3, 2 and 1 degrees of freedom
 CHI2_3_MEDIAN = float(chdtri(3, 0.5))
@@ -97,13 +98,16 @@ class NoiseScale:
         covariance's factor). A step that is not finite, or whose noise is singular, is left
         out.
         """
-        d = np.array([measured[0] - predicted[0], measured[1] - predicted[1],
-                      wrap_angle(measured[2] - predicted[2])], float)
+        d = difference(measured, predicted)
         noise = np.asarray(noise, float)
         if noise.shape == (3, 3) and np.all(np.isfinite(noise)) and np.all(np.isfinite(d)) \
                 and np.linalg.eigvalsh(0.5 * (noise + noise.T)).min() > 0.0:
             xy = float(d[:2] @ np.linalg.solve(noise[:2, :2], d[:2]))
-            self._steps.append((xy, float(d[2] ** 2 / noise[2, 2]), _nis(d, innovation_cov)))
+            # the covariance's factor: a step without a covariance (or a singular one) says
+            # nothing of it (NaN, inf: left out of its median)
+            nis = (math.nan if innovation_cov is None
+                   else mahalanobis2(measured, predicted, innovation_cov))
+            self._steps.append((xy, float(d[2] ** 2 / noise[2, 2]), nis))
             self.position, self.heading, self.covariance = self.estimate()
         return self.position, self.heading
 
@@ -126,14 +130,3 @@ class NoiseScale:
                       self.covariance_bounds[1])
         return (min(max(float(xy) / CHI2_2_MEDIAN, lo), hi),
                 min(max(float(yaw) / CHI2_1_MEDIAN, lo), hi), cov)
-
-
-def _nis(d: np.ndarray, cov: np.ndarray | None) -> float:
-    """Return ``d^T cov^-1 d`` (NaN: no covariance, or one that is not positive definite)."""
-    if cov is None:
-        return math.nan
-    cov = np.asarray(cov, float)
-    if cov.shape != (3, 3) or not np.all(np.isfinite(cov)) \
-            or np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0.0:
-        return math.nan
-    return float(d @ np.linalg.solve(cov, d))
