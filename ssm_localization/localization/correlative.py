@@ -37,6 +37,8 @@ _HOT_BATCHES = 4
 #: windows scored at a time, so that their cell indices (8 bytes per window and point) stay in
 #: the cache; of 1024-32768 on the campus's captured searches 8192 was the fastest
 _SCORE_CHUNK = 8192
+#: float32 holds every integer below this exactly (sums of up to 65 793 points' likelihoods)
+_FLOAT32_EXACT = 1 << 24
 _EMPTY_POOL = (np.zeros(0, np.int64),) * 3 + (np.zeros(0, np.int8), np.zeros(0))
 
 
@@ -373,16 +375,24 @@ class CorrelativeGrid:
         cell = ((np.asarray(r) + self._top) * self._wp
                 + ((np.asarray(c) + self._left) >> level))
         grid, k = self._levels[level], np.asarray(k)
-        out = np.empty(len(k), np.int32)
+        # Each window's sum as a product with ones in float32: exact while the sums stay below
+        # 2^24 (N < 65 793 points), and three times faster than numpy's sum along rows of a few
+        # dozen uint8
+        by_product = base.shape[1] * _SCALE < _FLOAT32_EXACT
+        out = np.empty(len(k), np.float32 if by_product else np.int32)
+        ones = np.ones(base.shape[1], np.float32)
         # in chunks of windows whose (chunk, N) cell indices stay in the cache
         for i in range(0, len(k), _SCORE_CHUNK):
             flat = np.take(base, k[i:i + _SCORE_CHUNK], axis=0)  # cells of the points: take
             flat += cell[i:i + _SCORE_CHUNK, None]               # and an in-place add
             # points above or below the padded grid fall off the flat array: its first and
             # last cells are padding (0)
-            np.take(grid, flat, mode='clip').sum(axis=1, dtype=np.int32,
-                                                 out=out[i:i + _SCORE_CHUNK])
-        return out * norm
+            vals = np.take(grid, flat, mode='clip')
+            if by_product:
+                np.matmul(vals.astype(np.float32), ones, out=out[i:i + _SCORE_CHUNK])
+            else:
+                vals.sum(axis=1, dtype=np.int32, out=out[i:i + _SCORE_CHUNK])
+        return out.astype(np.int32) * norm
 
     def _flat(self, r, c):
         """Flat index of map cells ``(r, c)`` (may lie in the padding) in the level grids."""

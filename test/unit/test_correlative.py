@@ -113,6 +113,20 @@ def test_windows_scored_in_chunks_score_the_same(grid, monkeypatch):
     assert np.array_equal(chunked.scores, whole.scores)
 
 
+def test_window_sums_by_product_and_by_sum_are_the_same(grid, monkeypatch):
+    """Each window's sum is a float32 product with ones; the integer sum gives the same."""
+    occ_map = _rooms()
+    yaw0 = occ_map.origin[2] + 0.2
+    pts = _scan_from(occ_map, _cell_centre_pose(occ_map, 15, 45, yaw0))
+    yaws = yaw0 + np.radians([-1.0, 0.0, 1.0])
+    product = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    monkeypatch.setattr(correlative, '_FLOAT32_EXACT', 0)     # too many points: integer sums
+    summed = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    assert len(product.scores) > 10
+    assert np.array_equal(product.poses, summed.poses)
+    assert np.array_equal(product.scores, summed.scores)
+
+
 def test_allowed_windows_pair_each_yaw_with_the_windows_of_its_regions():
     rng = np.random.default_rng(3)
     lab = rng.integers(-1, 5, 300)
