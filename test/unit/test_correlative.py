@@ -99,32 +99,22 @@ def test_the_leaves_do_not_depend_on_the_depth(grid, depth):
     assert np.array_equal(found.poses, ref.poses) and np.array_equal(found.scores, ref.scores)
 
 
-def test_windows_scored_in_chunks_score_the_same(grid, monkeypatch):
-    """The windows of a level are scored a chunk at a time: chunk edges change nothing."""
+@pytest.mark.parametrize('name, value', [
+    ('_SCORE_CHUNK', 7),        # windows scored a chunk at a time: chunk edges change nothing
+    ('_FLOAT32_EXACT', 0),      # sums as integers, not as float32 products with ones
+], ids=['chunks', 'integer_sums'])
+def test_how_windows_are_scored_changes_no_score(grid, monkeypatch, name, value):
+    """Chunk size and the float32 product (exact below 2^24) leave every leaf as it was."""
     occ_map = _rooms()
     yaw0 = occ_map.origin[2] + 0.1
     pts = _scan_from(occ_map, _cell_centre_pose(occ_map, 15, 45, yaw0))
     yaws = yaw0 + np.radians([-1.0, 0.0, 1.0])
     whole = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
-    monkeypatch.setattr(correlative, '_SCORE_CHUNK', 7)
-    chunked = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    monkeypatch.setattr(correlative, name, value)
+    other = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
     assert len(whole.scores) > 10
-    assert np.array_equal(chunked.poses, whole.poses)
-    assert np.array_equal(chunked.scores, whole.scores)
-
-
-def test_window_sums_by_product_and_by_sum_are_the_same(grid, monkeypatch):
-    """Each window's sum is a float32 product with ones; the integer sum gives the same."""
-    occ_map = _rooms()
-    yaw0 = occ_map.origin[2] + 0.2
-    pts = _scan_from(occ_map, _cell_centre_pose(occ_map, 15, 45, yaw0))
-    yaws = yaw0 + np.radians([-1.0, 0.0, 1.0])
-    product = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
-    monkeypatch.setattr(correlative, '_FLOAT32_EXACT', 0)     # too many points: integer sums
-    summed = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
-    assert len(product.scores) > 10
-    assert np.array_equal(product.poses, summed.poses)
-    assert np.array_equal(product.scores, summed.scores)
+    assert np.array_equal(other.poses, whole.poses)
+    assert np.array_equal(other.scores, whole.scores)
 
 
 def test_allowed_windows_pair_each_yaw_with_the_windows_of_its_regions():
