@@ -380,7 +380,7 @@ class CorrelativeGrid:
         # dozen uint8
         by_product = base.shape[1] * _SCALE < _FLOAT32_EXACT
         out = np.empty(len(k), np.float32 if by_product else np.int32)
-        ones = np.ones(base.shape[1], np.float32)
+        ones = np.ones(base.shape[1], np.float32) if by_product else None
         # in chunks of windows whose (chunk, N) cell indices stay in the cache
         for i in range(0, len(k), _SCORE_CHUNK):
             flat = np.take(base, k[i:i + _SCORE_CHUNK], axis=0)  # cells of the points: take

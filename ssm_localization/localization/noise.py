@@ -122,11 +122,13 @@ class NoiseScale:
             return 1.0, 1.0, 1.0
         steps = np.array(self._steps)
         xy, yaw = np.median(steps[:, :2], axis=0)
-        lo, hi = self.bounds
         nis = steps[np.isfinite(steps[:, 2]), 2]
-        cov = 1.0
-        if len(nis) >= self.min_samples:
-            cov = min(max(float(np.median(nis)) / CHI2_3_MEDIAN, self.covariance_bounds[0]),
-                      self.covariance_bounds[1])
-        return (min(max(float(xy) / CHI2_2_MEDIAN, lo), hi),
-                min(max(float(yaw) / CHI2_1_MEDIAN, lo), hi), cov)
+        cov = (_within(float(np.median(nis)) / CHI2_3_MEDIAN, self.covariance_bounds)
+               if len(nis) >= self.min_samples else 1.0)
+        return (_within(float(xy) / CHI2_2_MEDIAN, self.bounds),
+                _within(float(yaw) / CHI2_1_MEDIAN, self.bounds), cov)
+
+
+def _within(value: float, bounds: tuple[float, float]) -> float:
+    """Return ``value`` clamped to ``bounds`` ``(lo, hi)``."""
+    return min(max(value, bounds[0]), bounds[1])
