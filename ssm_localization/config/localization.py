@@ -78,11 +78,6 @@ class LocalizerConfig:
                                         'the correlative search, metres')
     beam_tolerance: float = param(0.15, 'metres (+2 % of the range) for a beam to agree with '
                                         'the map')
-    speck_area: float = param(0.0125, 'occupied components of the map no larger than this '
-                                      '(m^2) are specks (people who stood there while the map '
-                                      'was made); the beam check counts the returns through '
-                                      "walls that passed only specks, for the tracker's "
-                                      'forgive_specks (0: no specks)')
     score_sigma: float = param(0.05, 'residual scale of the explained fraction '
                                      'mean(exp(-r^2 / 2 sigma^2)), metres')
     contradiction_weight: float = param(1.0, 'score = explained fraction - this x fraction of '
@@ -133,7 +128,6 @@ class LocalizerConfig:
                        'search_rivals', 'search_max_cells',
                        'refine_iterations', 'polish_iterations', 'surface_depth',
                        'search_min_score', 'contradiction_weight', 'max_contradicting',
-                       'speck_area',
                        'min_score', 'verify_margin', 'ambiguity_margin', 'min_position_std',
                        'min_yaw_std', 'min_points')
         check_numbers(self, positive, nonnegative)

@@ -72,9 +72,6 @@ class TrackerConfig:
     min_score: float = param(
         0.4, 'a tracked pose scoring less (explained fraction minus the through-wall penalty) '
         'has lost the track: global localization runs on the same scan')
-    forgive_specks: bool = param(
-        True, "for min_score and the localizer's max_contradicting, returns that pass only "
-        "specks of the map (the localizer's speck_area), not a solid wall, are not through walls")
     max_position_std: float = param(
         0.25, 'a larger position std along the weakest direction after fusing the prediction: '
         'ambiguous, m')

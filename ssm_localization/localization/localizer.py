@@ -615,10 +615,9 @@ class GlobalLocalizer:
                 range_max: float) -> list[BeamCheck]:
         """Ray-cast ``angles`` from each laser pose and compare with the ``measured`` ranges."""
         cfg = self.config
-        expected, solid = self.caster.cast_past_soft(np.array(laser_poses), angles,
-                                                     cfg.max_cast_range)
-        return [check_beams(measured, e, tol=cfg.beam_tolerance, range_limit=range_max, solid=s)
-                for e, s in zip(expected, solid)]
+        expected = self.caster.cast(np.array(laser_poses), angles, cfg.max_cast_range)
+        return [check_beams(measured, e, tol=cfg.beam_tolerance, range_limit=range_max)
+                for e in expected]
 
     def polish(self, query: Query, h: Hypothesis) -> Hypothesis:
         """Return ``h`` after a last Gauss-Newton run on every endpoint of the scan."""

@@ -24,7 +24,6 @@ from .voting import PoseVoting
 from ..config.localization import LocalizerConfig
 from ..mapping.index import MapIndex
 from ..mapping.raycast import RayCaster
-from ..mapping.specks import speck_mask
 from ..progress import LayerHook, no_layers
 
 #: names of the layers, in the order they are built
@@ -58,10 +57,7 @@ def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
         surface = SurfaceModel.from_occupancy(m.occupied_mask(thresh), m.resolution, m.origin,
                                               cfg.surface_depth, reach=reach)
     with layer(LAYER_NAMES[2]):
-        occupied = m.occupied_mask(thresh)
-        caster = RayCaster(occupied, m.resolution, m.origin,
-                           soft=speck_mask(occupied, cfg.speck_area / m.resolution ** 2))
-        del occupied
+        caster = RayCaster(m.occupied_mask(thresh), m.resolution, m.origin)
     with layer(LAYER_NAMES[3]):
         voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw,
                             search_dims=cfg.vote_descriptor_dims)

@@ -16,8 +16,7 @@ Per scan (``Tracker.track``):
    free (a corridor's axis, ``weak_std``; the yaw of a few short returns, ``weak_yaw_std``); the
    fused pose is scored and ray-cast again, so every reported pose is one that was verified;
 5. decide: ``ok`` when the verified score is at least ``min_score`` with at most the
-   localizer's ``max_contradicting`` of the beams through walls (returns that passed only specks
-   of the map not counted, ``forgive_specks``), the fused position std is at
+   localizer's ``max_contradicting`` of the beams through walls, the fused position std is at
    most ``max_position_std`` and no rival in the window, distinct (the localizer's
    ``distinct_xy`` / ``distinct_yaw``, and along a direction the scan determines), scores within
    ``rival_margin`` and fits the prediction about as well (``rival_prior_chi2``; among poses the
@@ -340,10 +339,8 @@ class Tracker:
             return _Attempt(AMBIGUOUS, f'position std {std_xy:.2f} m along the weakest '
                                        f'direction even with the prediction',
                             **dict(common, confidence=refused))
-        past = self._past_specks(fused)
-        specks = f' ({past:.0%} past specks only)' if past > 0 else ''
-        facts = (f'explained {best.explained:.0%}, through walls {fused.contradicting:.0%}'
-                 f'{specks}, position std {std_xy * 1e3:.0f} mm, confidence {conf:.3f}')
+        facts = (f'explained {best.explained:.0%}, through walls {fused.contradicting:.0%}, '
+                 f'position std {std_xy * 1e3:.0f} mm, confidence {conf:.3f}')
         if conf < cfg.lost_confidence:
             return _Attempt(FAILED, f'the tracked pose is more likely wrong than right: {facts}',
                             **common)
@@ -352,22 +349,9 @@ class Tracker:
         return _Attempt(OK, f'tracked: {facts}', **common)
 
     def _plausible(self, h: Hypothesis) -> bool:
-        """
-        Tell whether a verified pose explains enough of the scan, few beams through walls.
-
-        With ``forgive_specks``, a return that passed only specks of the map is not counted
-        through a wall here (the calibrated confidence still sees it).
-        """
-        cfg = self.config
-        forgiven = self._past_specks(h) if cfg.forgive_specks else 0.0
-        weight = self.localizer.config.contradiction_weight
-        return (h.score + weight * forgiven >= cfg.min_score
-                and h.contradicting - forgiven <= self.localizer.config.max_contradicting)
-
-    @staticmethod
-    def _past_specks(h: Hypothesis) -> float:
-        """Return the fraction of ``h``'s checked beams through walls that passed only specks."""
-        return h.check.past_specks / max(h.check.beams, 1) if h.check is not None else 0.0
+        """Tell whether a verified pose explains enough of the scan, few beams through walls."""
+        return (h.score >= self.config.min_score
+                and h.contradicting <= self.localizer.config.max_contradicting)
 
     @staticmethod
     def _prior_m2(h: Hypothesis, pred: Pose2, pred_cov: np.ndarray) -> float:

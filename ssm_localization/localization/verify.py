@@ -29,7 +29,6 @@ class BeamCheck:
     through: int = 0      # returns behind the map's wall or where the map has none
     shorts: int = 0       # returns in front of the map's wall
     missing: int = 0      # no return where the map has a wall well within the sensor's range
-    past_specks: int = 0  # of ``through``: past specks of the map only, not a solid wall
 
     @property
     def score(self) -> float:
@@ -37,8 +36,7 @@ class BeamCheck:
 
 
 def check_beams(measured: np.ndarray, expected: np.ndarray, tol: float = 0.15,
-                rel_tol: float = 0.02, range_limit: float = math.inf,
-                solid: np.ndarray | None = None) -> BeamCheck:
+                rel_tol: float = 0.02, range_limit: float = math.inf) -> BeamCheck:
     """
     Compare measured ranges with ranges ray-cast on the map (``inf`` = no return / no hit).
 
@@ -46,10 +44,6 @@ def check_beams(measured: np.ndarray, expected: np.ndarray, tol: float = 0.15,
     a wall counts as neither (glass, dark surfaces), so only solid evidence contradicts a pose.
     ``missing`` counts the no-returns where the map has a wall within 90 % of ``range_limit``
     (the sensor's range), for the evidence of the answer.
-
-    ``solid``: the ranges ray-cast past the map's specks (``RayCaster.cast_past_soft``);
-    ``past_specks`` then counts the returns through a wall that passed only specks: at or short
-    of the first solid wall behind them.
     """
     z = np.asarray(measured, float)
     e = np.asarray(expected, float)
@@ -65,15 +59,8 @@ def check_beams(measured: np.ndarray, expected: np.ndarray, tol: float = 0.15,
     short = both & (diff <= -t)
     with np.errstate(invalid='ignore'):
         missing = ~zf & ef & (e < 0.9 * range_limit)
-    past = 0
-    if solid is not None:
-        s = np.asarray(solid, float)
-        sf = np.isfinite(s)
-        with np.errstate(invalid='ignore'):
-            behind_solid = sf & (z - s >= tol + rel_tol * np.where(sf, s, 0.0))
-        past = int((contradicting & ef & ~behind_solid).sum())
     return BeamCheck(consistent=float(consistent.sum() / n),
                      contradicting=float(contradicting.sum() / n), short=float(short.sum() / n),
                      beams=int(len(z)), returns=int(zf.sum()), hits=int(hit.sum()),
                      through=int(contradicting.sum()), shorts=int(short.sum()),
-                     missing=int(missing.sum()), past_specks=past)
+                     missing=int(missing.sum()))

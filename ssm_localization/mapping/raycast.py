@@ -61,11 +61,9 @@ _RAY_FIELDS = tuple(f.name for f in fields(_Rays))
 
 
 #: the caster's cell codes (uint16, one per cell of the padded grid): a free cell holds its
-#: squared distance to the nearest occupied cell (cells^2) up to :data:`SKIP_CAP`; a *soft*
-#: cell is occupied, but :meth:`RayCaster.cast_past_soft` sees past it (a speck of the map)
+#: squared distance to the nearest occupied cell (cells^2) up to :data:`SKIP_CAP`
 OCCUPIED = 0xFFFF
-SOFT = 0xFFFE
-OUTSIDE = 0xFFFD
+OUTSIDE = 0xFFFE
 #: squared distances are exact up to 255^2 cells^2 (12.75 m at 0.05 m) and clamped there: a
 #: cell further from every wall jumps 255 - sqrt(2) cells at a time instead of further
 SKIP_LIMIT = 255
@@ -109,13 +107,10 @@ class RayCaster:
     tail_rays = 128
 
     def __init__(self, occupied: np.ndarray, resolution: float, origin,
-                 accelerate: bool = True, soft: np.ndarray | None = None) -> None:
+                 accelerate: bool = True) -> None:
         occ = np.asarray(occupied, dtype=bool)
         if occ.ndim != 2:
             raise ValueError(f'occupied: expected an (H, W) array, got shape {occ.shape}')
-        if soft is not None and np.shape(soft) != occ.shape:
-            raise ValueError(f'soft: expected the shape of occupied {occ.shape}, got '
-                             f'{np.shape(soft)}')
         res = float(resolution)
         if not (math.isfinite(res) and res > 0):
             raise ValueError(f'resolution: expected a positive number, got {resolution}')
@@ -131,12 +126,6 @@ class RayCaster:
         else:
             code = np.zeros((h + 2, w + 2), dtype=np.uint16)
         code[padded] = OCCUPIED
-        #: whether any occupied cell is soft (if not, :meth:`cast_past_soft` casts once)
-        self.has_soft = False
-        if soft is not None:
-            padded[1:-1, 1:-1] &= np.asarray(soft, dtype=bool)
-            code[padded] = SOFT
-            self.has_soft = bool(padded.any())
         del padded
         code[0, :] = code[-1, :] = OUTSIDE
         code[:, 0] = code[:, -1] = OUTSIDE
@@ -145,31 +134,6 @@ class RayCaster:
 
     def cast(self, sensor_poses, beam_angles, max_range: float) -> np.ndarray:
         """Ranges (P, B) of beams ``beam_angles`` (B,) from ``sensor_poses`` (P, 3)."""
-        return self._cast(sensor_poses, beam_angles, max_range, None)
-
-    def cast_past_soft(self, sensor_poses, beam_angles,
-                       max_range: float) -> tuple[np.ndarray, np.ndarray]:
-        """
-        Ranges (P, B) to the first occupied cell and to the first occupied cell not soft.
-
-        The first are those of :meth:`cast`; the second see past the soft cells (``inf`` where
-        only soft cells lie within ``max_range``).
-        """
-        if not self.has_soft:
-            first = self._cast(sensor_poses, beam_angles, max_range, None)
-            return first, first.copy()
-        first = np.full((len(np.asarray(sensor_poses).reshape(-1, 3)),
-                         np.size(beam_angles)), np.inf)
-        solid = self._cast(sensor_poses, beam_angles, max_range, first.reshape(-1))
-        return first, solid
-
-    def _cast(self, sensor_poses, beam_angles, max_range: float,
-              first: np.ndarray | None) -> np.ndarray:
-        """
-        Return the ranges of :meth:`cast`; with ``first`` (P * B,), those past soft cells.
-
-        ``first`` then receives the range to the first occupied cell, soft or not.
-        """
         res = self.resolution
         h, w = self.shape
         poses = np.asarray(sensor_poses, dtype=float).reshape(-1, 3)
@@ -227,22 +191,14 @@ class RayCaster:
         # into methods it ran 10-20 % slower.)
         while rays.ids.size:
             if rays.ids.size <= self.tail_rays:
-                self._finish(ranges, rays, first)
+                self._finish(ranges, rays)
                 break
             # Stop the rays that entered an occupied cell (their range), left the grid or
             # passed max_range.
             cell = code[rays.flat]
             over = rays.t > rays.t_end
-            hit = (cell >= SOFT) & ~over
-            if first is None:
-                done = (cell >= OUTSIDE) | over
-            else:
-                # past soft cells: record the first occupied cell, stop at a solid one
-                if hit.any():
-                    k = rays.ids[hit]
-                    first[k] = np.minimum(first[k], rays.t[hit] * res)
-                hit &= cell == OCCUPIED
-                done = (cell == OCCUPIED) | (cell == OUTSIDE) | over
+            hit = (cell == OCCUPIED) & ~over
+            done = (cell >= OUTSIDE) | over
             if hit.any():
                 ranges[rays.ids[hit]] = rays.t[hit] * res
             if done.any():
@@ -277,30 +233,25 @@ class RayCaster:
                 rays.tmy[near] = np.where(xs, b, b + rays.tdy[near])
         return out
 
-    def _finish(self, ranges: np.ndarray, rays: _Rays, first: np.ndarray | None) -> None:
+    def _finish(self, ranges: np.ndarray, rays: _Rays) -> None:
         """
         Finish the last few rays one by one in plain Python.
 
         The same steps, in the same floating-point operations, as the vectorized loop of
-        :meth:`_cast` (so the same ranges), without its per-step numpy overhead, which dominates
+        :meth:`cast` (so the same ranges), without its per-step numpy overhead, which dominates
         once few rays are left (the long ones, often grazing a wall cell by cell).
         """
         code, skip, res = memoryview(self._code), memoryview(self._skip), self.resolution
-        occupied, soft, outside = OCCUPIED, SOFT, OUTSIDE
-        # the lowest code that stops a ray: past soft cells only a solid one or the grid's edge
-        stop = outside if first is None else occupied
+        occupied, outside = OCCUPIED, OUTSIDE
         h, w = self.shape
         wp = w + 2
         for ray, f, ti, t_end, ax, ay, dx, dy, sx, sy, x0, y0, vx, vy, ix, iy in rays.each():
             while True:
                 cell = code[f]
                 over = ti > t_end
-                if cell >= soft and not over:
-                    if first is not None:
-                        first[ray] = min(first[ray], ti * res)
-                    if cell == occupied or first is None:
-                        ranges[ray] = ti * res
-                if cell >= stop or cell == outside or over:
+                if cell == occupied and not over:
+                    ranges[ray] = ti * res
+                if cell >= outside or over:
                     break
                 jump = skip[cell]
                 if jump >= 2.0:      # as in _locate, without the nudge

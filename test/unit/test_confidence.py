@@ -62,20 +62,6 @@ def test_beam_counts():
     assert c.consistent == pytest.approx(3 / 8) and c.contradicting == pytest.approx(2 / 8)
 
 
-def test_returns_past_specks_only_are_counted():
-    """With the ranges past the map's specks: which returns through a wall passed only specks."""
-    inf = np.inf
-    expected = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.0])     # a speck at 1 m ...
-    solid = np.array([3.0, 3.0, 3.0, 3.0, inf, 2.0, inf])        # ... the wall at 3 m
-    measured = np.array([1.0, 2.0, 3.0, 4.0, 2.5, 3.0, inf])
-    c = check_beams(measured, expected, tol=0.15, range_limit=10.0, solid=solid)
-    # through: all but the first; of them past specks only: between the speck and the wall, at
-    # the wall, past a lone speck; not past the wall behind the speck or a wall with none
-    assert (c.returns, c.hits, c.through, c.past_specks) == (6, 1, 5, 3)
-    plain = check_beams(measured, expected, tol=0.15, range_limit=10.0)
-    assert plain == dataclasses.replace(c, past_specks=0)
-
-
 def _evidence(**kw) -> Evidence:
     base = {'hit': 0.95, 'through': 0.02, 'short': 0.03, 'missing': 0.0, 'on_wall': 0.97,
             'unknown': 0.01, 'unexplained_runs': 0.0, 'explained': 0.9, 'margin': 0.6,

@@ -157,32 +157,6 @@ def test_random_grids_match_brute_force(seed):
     assert np.abs(got[fin] - expect[fin]).max(initial=0.0) < 1e-9
 
 
-@pytest.mark.parametrize('tail_rays', [0, 200, 10 ** 9])
-def test_casting_past_soft_cells_sees_the_solid_walls_behind(tail_rays):
-    """``cast_past_soft``: the ranges of ``cast``, and those of a grid without the soft cells."""
-    rng = np.random.default_rng(7)
-    occ = _room(90, 140) | (rng.random((90, 140)) < 0.02)
-    occ[40:43, 20:120] = True
-    soft = occ & (rng.random(occ.shape) < 0.6)
-    origin = (-1.0, 2.0, 0.3)
-    poses = np.column_stack((rng.uniform(-0.5, 4.0, 25), rng.uniform(2.5, 5.5, 25),
-                             rng.uniform(-math.pi, math.pi, 25)))
-    angles = beam_angles(120)
-    caster = RayCaster(occ, RES, origin, soft=soft)
-    caster.tail_rays = tail_rays
-    first, solid = caster.cast_past_soft(poses, angles, 6.0)
-    assert np.array_equal(first, RayCaster(occ, RES, origin).cast(poses, angles, 6.0))
-    assert np.array_equal(caster.cast(poses, angles, 6.0), first)
-    behind = RayCaster(occ & ~soft, RES, origin).cast(poses, angles, 6.0)
-    assert np.array_equal(np.isinf(solid), np.isinf(behind))
-    fin = np.isfinite(behind)
-    assert np.abs(solid[fin] - behind[fin]).max() < 1e-9       # jumps differ, not the cells
-    assert (solid[fin] > first[fin] + 1e-9).mean() > 0.2 and np.all(solid >= first)
-    without = RayCaster(occ, RES, origin, soft=np.zeros_like(occ))      # no soft cell: one cast
-    assert not without.has_soft and caster.has_soft
-    assert all(np.array_equal(r, first) for r in without.cast_past_soft(poses, angles, 6.0))
-
-
 @pytest.mark.parametrize('seed', range(4))
 def test_plain_python_tail_gives_the_same_ranges_as_the_vectorized_loop(seed):
     """Rays finished one by one (``tail_rays``) must read exactly what the numpy loop reads."""

@@ -266,38 +266,6 @@ def test_a_scan_whose_few_returns_pass_through_walls_does_not_coast():
     assert tracker.lost
 
 
-def test_returns_past_the_maps_specks_do_not_lose_the_track():
-    """
-    Specks of the map (people who stood there) that the scan sees through do not lose a track.
-
-    Two rings of one-cell specks around the pose, gone when the scan is taken: 69 % of the beams
-    pass one, so they see through walls as far as the map says. A tracked pose at the truth stays
-    ``ok`` (``forgive_specks``); counted as through walls, the track is lost.
-    """
-    clean = synthetic_map()
-    pose = (1.0, 3.0, 0.3)
-    data = np.array(clean.data, copy=True)
-    for r, n, off in ((0.6, 25, 0.0), (0.9, 37, 0.05)):
-        for a in 2 * math.pi * np.arange(n) / n + off:
-            col = int((pose[0] + r * math.cos(a) - clean.origin[0]) / clean.resolution)
-            row = int((pose[1] + r * math.sin(a) - clean.origin[1]) / clean.resolution)
-            data[row, col] = 100
-    speckled = dataclasses.replace(clean, data=data)
-    angles = -math.pi + 2 * math.pi / 360 * np.arange(360)
-    ranges = GlobalLocalizer(build_index(clean)).caster.cast(np.array([pose]), angles, 30.0)[0]
-    scan = ScanRecord.from_ranges(0.0, ranges, angles[0], angles[1] - angles[0], range_max=30.0)
-    loc = GlobalLocalizer(build_index(speckled))
-    tracker = Tracker(loc)
-    tracker.set_prior(pose)
-    res = tracker.track(scan, (0.0, 0.0, 0.0), 0.0)
-    assert res.ok and res.mode == 'tracked' and _error(res.pose, pose)[0] < 0.05, res.message
-    assert '(69% past specks only)' in res.message, res.message
-    tracker = Tracker(loc, TrackerConfig(forgive_specks=False))
-    tracker.set_prior(pose)
-    res = tracker.track(scan, (0.0, 0.0, 0.0), 0.0)
-    assert not res.ok and 'verification failed' in res.message, res.message
-
-
 def test_a_pose_that_is_not_ok_does_not_move_the_track(track_bag):
     """Only an ok pose becomes the belief; otherwise the next scan is judged by the odometry."""
     bag, odom, truth, _, loc = track_bag
