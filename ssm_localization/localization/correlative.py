@@ -392,7 +392,7 @@ class CorrelativeGrid:
                 np.matmul(vals.astype(np.float32), ones, out=out[i:i + _SCORE_CHUNK])
             else:
                 vals.sum(axis=1, dtype=np.int32, out=out[i:i + _SCORE_CHUNK])
-        return out.astype(np.int32) * norm
+        return out.astype(np.int32, copy=False) * norm
 
     def _flat(self, r, c):
         """Flat index of map cells ``(r, c)`` (may lie in the padding) in the level grids."""
