@@ -260,6 +260,7 @@ class RayCaster:
                     row = min(max(math.floor(y0 + vy * ti), -1), h)
                     ax = ((col + 1.0 if vx > 0 else float(col)) - x0) * ix if vx != 0 else math.inf
                     ay = ((row + 1.0 if vy > 0 else float(row)) - y0) * iy if vy != 0 else math.inf
+                    ax, ay = max(ax, ti), max(ay, ti)
                     f = (row + 1) * wp + (col + 1)
                 elif ax < ay:
                     ti, f, ax = ax, f + sx, ax + dx
@@ -271,7 +272,10 @@ class RayCaster:
         Flat padded index of the cell at ray parameter ``t`` and its next boundary crossings.
 
         ``nudge``: move a hair along the ray first so that ``floor`` picks the cell being
-        entered at a boundary.
+        entered at a boundary. A crossing that rounding puts behind ``t`` (a ray nearly along a
+        cell boundary, e.g. at 180 degrees from a cell corner: ``y0 + vy t`` rounds back onto the
+        boundary) is taken at ``t``: the next step crosses it at once instead of going back to
+        it, and a ray so placed after a jump could otherwise go back and forth for ever.
         """
         h, w = self.shape
         tt = t + 1e-9 * nudge
@@ -282,7 +286,7 @@ class RayCaster:
             next_y = np.where(uy > 0, row + 1.0, row.astype(float))
             tmx = np.where(ux != 0, (next_x - px) * inv_x, np.inf)
             tmy = np.where(uy != 0, (next_y - py) * inv_y, np.inf)
-        return (row + 1) * (w + 2) + (col + 1), tmx, tmy
+        return (row + 1) * (w + 2) + (col + 1), np.maximum(tmx, t), np.maximum(tmy, t)
 
 
 def cast_rays(occupied: np.ndarray, resolution: float, origin, sensor_poses, beam_angles,

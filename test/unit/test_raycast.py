@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import signal
 import time
 
 import numpy as np
@@ -212,3 +213,38 @@ def test_jumps_do_not_change_ranges_on_an_open_map():
     fast = cast_rays(occ, RES, (0, 0, 0), poses, ang, 100.0)
     plain = RayCaster(occ, RES, (0, 0, 0), accelerate=False).cast(poses, ang, 100.0)
     assert np.abs(fast - plain).max() < 1e-9
+
+
+@pytest.fixture
+def within_seconds():
+    """Fail a test that runs for more than ten seconds (a ray that never ends), not hang."""
+    def expired(signum, frame):
+        raise TimeoutError('the cast did not finish')
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(10)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, previous)
+
+
+@pytest.mark.parametrize('tail_rays', [0, 10 ** 9])
+def test_a_ray_along_a_cell_boundary_ends(within_seconds, tail_rays):
+    """
+    From a cell corner at 180 degrees, ``y0 + vy t`` rounds back onto the boundary after a jump.
+
+    Its next crossing then lay behind the ray, which stepped back to it and jumped again for
+    ever when a wall three cells off its path stopped the jumps (an office map, a search leaf on
+    a 0.1 m grid over 0.05 m cells, a beam at -pi: the localizer hung).
+    """
+    occ = _room(64, 64)
+    occ[35, 40:44] = True                 # three cells above the ray's row
+    corners = [(50, 32), (50, 20), (30, 44), (12, 33)]
+    poses = np.array([(c * RES, r * RES, yaw) for c, r in corners
+                      for yaw in (0.0, math.pi / 2, math.pi, -math.pi / 2)])
+    angles = np.array([-math.pi, -math.pi / 2, 0.0, math.pi / 2, math.pi])
+    caster = RayCaster(occ, RES, (0.0, 0.0, 0.0))
+    caster.tail_rays = tail_rays
+    got = caster.cast(np.repeat(poses, 40, axis=0), angles, 30.0)[::40]
+    expect = _brute_force(occ, RES, (0.0, 0.0, 0.0), poses, angles, 30.0)
+    assert np.abs(got - expect).max() < 1e-9
+    assert got[0, 0] == pytest.approx(2.45)           # from (2.5, 1.6) to the wall's face at 0.05
