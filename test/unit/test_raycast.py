@@ -233,8 +233,8 @@ def test_a_ray_along_a_cell_boundary_ends(within_seconds, tail_rays):
     From a cell corner at 180 degrees, ``y0 + vy t`` rounds back onto the boundary after a jump.
 
     Its next crossing then lay behind the ray, which stepped back to it and jumped again for
-    ever when a wall three cells off its path stopped the jumps (an office map, a search leaf on
-    a 0.1 m grid over 0.05 m cells, a beam at -pi: the localizer hung).
+    ever when a wall three cells off its path stopped the jumps (found ray-casting the search's
+    leaves on the 30 M-cell office: 0.1 m search cells over 0.05 m map cells, a beam at -pi).
     """
     occ = _room(64, 64)
     occ[35, 40:44] = True                 # three cells above the ray's row
