@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 import random
+import signal
 import time
 
 from ssm_localization.threads import limit_blas_threads
@@ -74,6 +75,18 @@ def _domain_is_quiet(domain: int, wait: float = 0.7) -> bool:
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def within_seconds():
+    """Fail a test still running after ten seconds (a loop that never ends) instead of hanging."""
+    def expired(signum, frame):
+        raise TimeoutError('still running after 10 s')
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(10)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, previous)
 
 
 @pytest.fixture(scope='session')

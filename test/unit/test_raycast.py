@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-import signal
 import time
 
 import numpy as np
@@ -213,18 +212,6 @@ def test_jumps_do_not_change_ranges_on_an_open_map():
     fast = cast_rays(occ, RES, (0, 0, 0), poses, ang, 100.0)
     plain = RayCaster(occ, RES, (0, 0, 0), accelerate=False).cast(poses, ang, 100.0)
     assert np.abs(fast - plain).max() < 1e-9
-
-
-@pytest.fixture
-def within_seconds():
-    """Fail a test that runs for more than ten seconds (a ray that never ends), not hang."""
-    def expired(signum, frame):
-        raise TimeoutError('the cast did not finish')
-    previous = signal.signal(signal.SIGALRM, expired)
-    signal.alarm(10)
-    yield
-    signal.alarm(0)
-    signal.signal(signal.SIGALRM, previous)
 
 
 @pytest.mark.parametrize('tail_rays', [0, 10 ** 9])

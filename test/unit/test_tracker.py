@@ -266,6 +266,24 @@ def test_a_scan_whose_few_returns_pass_through_walls_does_not_coast():
     assert tracker.lost
 
 
+def test_a_coast_at_a_prior_on_a_cell_corner_ends(track_bag, within_seconds):
+    """
+    An ``initialpose`` typed in centimetres on this 0.05 m map lies on a cell corner.
+
+    A scan too sparse to track coasts and is ray-cast at the prediction, here the prior itself;
+    from (12.35, 0.8) at 0 degrees the beam at -180 degrees runs along a cell boundary, and the
+    caster looped for ever (``test_raycast.py::test_a_ray_along_a_cell_boundary_ends``).
+    """
+    _, _, _, _, loc = track_bag
+    tracker = Tracker(loc)
+    tracker.set_prior((12.35, 0.8, 0.0))
+    ranges = np.full(360, np.inf)
+    ranges[[0, 90, 180]] = 1.0                               # 3 returns of 360: too sparse
+    scan = ScanRecord.from_ranges(0.0, ranges, -math.pi, 2 * math.pi / 360, range_max=30.0)
+    res = tracker.track(scan, (0.0, 0.0, 0.0), 0.0)
+    assert 'too few valid points' in res.message and res.status != 'ok', res.message
+
+
 def test_a_pose_that_is_not_ok_does_not_move_the_track(track_bag):
     """Only an ok pose becomes the belief; otherwise the next scan is judged by the odometry."""
     bag, odom, truth, _, loc = track_bag
