@@ -54,6 +54,10 @@ class LocalizerConfig:
     search_points: int = param(40, 'scan points (of the spatially even set) the search scores')
     search_alignments: int = param(2, "further seed yaws from aligning the scan's wall "
                                       "directions with the map's")
+    search_more_alignments: int = param(2, 'an answer not ok gets a second look (maps of one '
+                                           'region): the search once more at this many further '
+                                           'alignment yaws, its places decided together with '
+                                           'the first ones')
     search_budget: float = param(0.2, 'seconds after which the search stops with what it has')
     # -- refinement on the wall surface
     refine_hypotheses: int = param(8, 'hypotheses refined on the wall surface (best by '
@@ -125,6 +129,7 @@ class LocalizerConfig:
                     'covariance_scale',
                     'sigma_d')
         nonnegative = ('vote_descriptor_dims', 'search_spread', 'search_alignments',
+                       'search_more_alignments',
                        'search_rivals', 'search_max_cells',
                        'refine_iterations', 'polish_iterations', 'surface_depth',
                        'search_min_score', 'contradiction_weight', 'max_contradicting',

@@ -141,7 +141,7 @@ class SearchRegions:
         return out
 
     def plan(self, scan_angles: np.ndarray, seeds: list[Pose2],
-             cfg: LocalizerConfig) -> SearchPlan:
+             cfg: LocalizerConfig, more: bool = False) -> SearchPlan:
         """
         Return the yaws to search in each region.
 
@@ -150,7 +150,9 @@ class SearchRegions:
         every region at its ``search_alignments`` yaws that align the scan's wall directions
         (``scan_angles``) with its own; each yaw with its flip, each +- ``search_spread`` in
         steps of ``search_step``. With one region: the yaws of ``GlobalLocalizer.search_yaws``,
-        in the same order.
+        in the same order. ``more`` (the second look at an answer that is not ``ok``): instead
+        only the next ``search_more_alignments`` alignment yaws of every region, those the
+        first plan did not search.
         """
         centres: list[tuple[float, int]] = []          # (yaw, region or -1: all)
         for pose in seeds:
@@ -160,13 +162,20 @@ class SearchRegions:
                 centres.append((yaw, region))
             if len(centres) >= cfg.search_seeds:
                 break
-        aligned = self.alignment_yaws(scan_angles, cfg.search_alignments)
+        first = cfg.search_alignments
+        aligned = self.alignment_yaws(scan_angles,
+                                      first + (cfg.search_more_alignments if more else 0))
         yaws, allowed = [], []
         for r in range(self.count):
             mine = [c for c, g in centres if g in (r, -1)]
-            for yaw in aligned[r]:
+            for yaw in aligned[r][:first]:
                 if is_new_yaw(yaw, mine, cfg.search_step):
                     mine.append(float(yaw))
+            if more:
+                searched, mine = mine, []
+                for yaw in aligned[r][first:]:
+                    if is_new_yaw(yaw, searched + mine, cfg.search_step):
+                        mine.append(float(yaw))
             if not mine:
                 continue
             region_yaws = spread_yaws(mine, cfg)

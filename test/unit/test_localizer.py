@@ -179,6 +179,30 @@ def test_search_window_limits_the_positions(depot, localizer, query):
         assert box[1] - 0.05 <= h.initial_pose[1] <= box[3] + 0.05
 
 
+def test_a_second_look_searches_further_alignments_when_the_answer_is_not_ok(depot, localizer):
+    """
+    An answer that is not ``ok`` is decided again with a search at further alignment yaws.
+
+    Here the first look has no yaw to search at all (no alignment, and a RANSAC that needs more
+    inliers than a scan has, so no seed): without a second look the answer is ``failed``, with
+    one the next two alignments find the place.
+    """
+    bag, index = depot
+    blind = dataclasses.replace(localizer.config, search_alignments=0, fine_min_inliers=10 ** 6,
+                                search_more_alignments=0)
+    s, truth = bag.scans[0], _truth(depot)
+    args = (s.ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max)
+    first = GlobalLocalizer(index, blind).localize_scan(*args)
+    assert first.status == 'failed' and first.pose is None, first.message
+    second = GlobalLocalizer(index, dataclasses.replace(blind, search_more_alignments=2))
+    _assert_close(second.localize_scan(*args), truth)
+    # an ok answer takes no second look: the same answer either way
+    plain = localizer.localize_scan(*args)
+    again = GlobalLocalizer(index, dataclasses.replace(localizer.config,
+                                                       search_more_alignments=0))
+    assert plain.status == 'ok' and again.localize_scan(*args).pose == plain.pose
+
+
 def test_refine_estimates_the_wall_offset_of_ray_cast_scans(depot, localizer, query):
     """The defaults' prior puts walls half a cell deep; ray-cast scans pull it to the boundary."""
     truth = _truth(depot)

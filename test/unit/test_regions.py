@@ -79,6 +79,30 @@ def test_scan_of_the_turned_building_is_searched_at_its_yaw_and_found(campus):
     assert math.hypot(loc_.pose[0] - truth[0], loc_.pose[1] - truth[1]) < 0.05
 
 
+def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus):
+    occ, loc = campus
+    truth = (68.0, 9.0, 2.0)
+    angles = beam_angles(360)
+    ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([truth]), angles,
+                       30.0)[0]
+    query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
+    cfg = loc.config
+    seeds = [(10.0, 10.0, 0.3)]
+    first = loc.regions.plan(query.wall_angles, seeds, cfg)
+    more = loc.regions.plan(query.wall_angles, seeds, cfg, more=True)
+    wider = loc.regions.alignment_yaws(
+        query.wall_angles, cfg.search_alignments + cfg.search_more_alignments)
+    for r in range(loc.regions.count):
+        old, new = first.yaws[first.allowed[:, r]], more.yaws[more.allowed[:, r]]
+        assert len(new), 'every region has further alignments'
+        # nothing searched twice; every new centre is one of the region's next alignments
+        gaps = np.abs(wrap_angle(2.0 * (new[:, None] - old[None, :]))) / 2.0
+        assert gaps.min() > cfg.search_step / 2.0
+        nxt = wider[r][cfg.search_alignments:]
+        centre = np.abs(wrap_angle(2.0 * (new[:, None] - nxt[None, :]))) / 2.0
+        assert (centre.min(axis=1) <= cfg.search_spread + 1e-9).all()
+
+
 def test_one_building_is_one_region_searched_as_before():
     bag = read_bag(BAGS / 'depot_sim')
     loc = GlobalLocalizer(build_index(bag.map))
