@@ -92,15 +92,22 @@ def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus
     more = loc.regions.plan(query.wall_angles, seeds, cfg, more=True)
     wider = loc.regions.alignment_yaws(
         query.wall_angles, cfg.search_alignments + cfg.search_more_alignments)
+
+    def apart(a, b):                    # (len(a), len(b)) angles apart modulo a half turn
+        return np.abs(wrap_angle(2.0 * (np.asarray(a)[:, None] - np.asarray(b)[None, :]))) / 2.0
+
+    seeded = loc.regions.region_of(np.array([seeds[0][:2]]))[0]
     for r in range(loc.regions.count):
-        old, new = first.yaws[first.allowed[:, r]], more.yaws[more.allowed[:, r]]
+        new = more.yaws[more.allowed[:, r]]
         assert len(new), 'every region has further alignments'
-        # nothing searched twice; every new centre is one of the region's next alignments
-        gaps = np.abs(wrap_angle(2.0 * (new[:, None] - old[None, :]))) / 2.0
-        assert gaps.min() > cfg.search_step / 2.0
+        # every new yaw lies around one of the region's next alignments ...
         nxt = wider[r][cfg.search_alignments:]
-        centre = np.abs(wrap_angle(2.0 * (new[:, None] - nxt[None, :]))) / 2.0
-        assert (centre.min(axis=1) <= cfg.search_spread + 1e-9).all()
+        assert (apart(new, nxt).min(axis=1) <= cfg.search_spread + 1e-9).all()
+        # ... whose centre the first plan did not search (its first alignments, the seed's yaw)
+        centres = [y for y in nxt if apart(new, [y]).min() < 1e-9]
+        old = list(wider[r][:cfg.search_alignments]) + ([0.3] if r == seeded else [])
+        assert centres and apart(centres, old).min() > cfg.search_step
+        assert apart(centres, first.yaws[first.allowed[:, r]]).min() > 0.0
 
 
 def test_one_building_is_one_region_searched_as_before():
