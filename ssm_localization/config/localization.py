@@ -54,7 +54,7 @@ class LocalizerConfig:
     search_points: int = param(40, 'scan points (of the spatially even set) the search scores')
     search_alignments: int = param(2, "further seed yaws from aligning the scan's wall "
                                       "directions with the map's")
-    search_more_alignments: int = param(2, 'an answer not ok gets a second look (maps of one '
+    search_more_alignments: int = param(3, 'an answer not ok gets a second look (maps of one '
                                            'region): the search once more at this many further '
                                            'alignment yaws, its places decided together with '
                                            'the first ones')
