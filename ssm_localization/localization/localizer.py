@@ -380,24 +380,35 @@ class GlobalLocalizer:
             clock.lap('search')
         verified, others = [], []
         if hyps:
-            ranked = _by_correlation(hyps)
-            todo = self.to_refine(ranked)
-            refined = self.refine(query, todo, len(todo), basin=True)
-            clock.lap('refine')
-            verified = self.verify_contenders(query, refined)
-            clock.lap('verify')
-            others = [h for h in ranked if h not in todo]
+            verified, others = self.examine(query, hyps, clock)
             answer = self.decide(query, verified, clock, others=others)
             if answer.status == OK:
                 return answer
         else:
             answer = self._failed(clock, 'no pose hypothesis: neither the pose votes nor the '
                                          'correlative search found a place that fits')
-        if (not (self.config.search and self.config.search_more_alignments)
-                or self.regions.count > 1):
-            return answer
         return (self.second_look(query, seeds, verified, others, clock)
                 or replace(answer, latency_ms=clock.total_ms))
+
+    def examine(self, query: Query, hyps: list[Hypothesis], clock: StageClock,
+                before: list[Hypothesis] = ()) -> tuple[list[Hypothesis], list[Hypothesis]]:
+        """
+        Return ``(verified, others)``: the hypotheses worth it refined and verified, the rest.
+
+        :meth:`to_refine` picks from ``hyps`` by correlation, they are refined (from two
+        starts), joined with the places examined ``before`` (a place met twice counts once)
+        and every contender is verified (:meth:`verify_contenders`; a place verified before is
+        not cast again). ``others``: the hypotheses of ``hyps`` not refined.
+        """
+        ranked = _by_correlation(hyps)
+        todo = self.to_refine(ranked)
+        refined = self.refine(query, todo, len(todo), basin=True)
+        clock.lap('refine')
+        merged = _merged(sorted([*before, *refined], key=lambda h: -h.explained),
+                         lambda h: h.laser_pose)
+        verified = self.verify_contenders(query, merged)
+        clock.lap('verify')
+        return verified, [h for h in ranked if h not in todo]
 
     def second_look(self, query: Query, seeds: list[Pose2], verified: list[Hypothesis],
                     others: list[Hypothesis], clock: StageClock) -> Localization | None:
@@ -410,28 +421,23 @@ class GlobalLocalizer:
         museum's 45 degree halls) can put the right yaw beyond the first two alignments. Its
         places join the first ones, refined and verified places included, and the answer is
         decided on all of them: a rival found before stays a rival. None when the second
-        search finds no place.
+        search finds no place, or is not to be run.
 
         Only on a map of one region (a building). On a campus of several regions the second
         search costs more than the first, every region at further yaws: measured on the campus
         benchmark it found 1.6 points more places but took the p95 latency from 127 to 214 ms
         (docs/BENCHMARKS.md).
         """
-        plan = self.regions.plan(query.wall_angles, seeds, self.config, more=True)
+        cfg = self.config
+        if not (cfg.search and cfg.search_more_alignments) or self.regions.count > 1:
+            return None
+        plan = self.regions.plan(query.wall_angles, seeds, cfg, more=True)
         found = self.correlate(query, self.search_hypotheses(query, plan))
         clock.lap('search')
         if not found:
             return None
-        ranked = _by_correlation(found)
-        todo = self.to_refine(ranked)
-        refined = self.refine(query, todo, len(todo), basin=True)
-        clock.lap('refine')
-        merged = _merged(sorted(verified + refined, key=lambda h: -h.explained),
-                         lambda h: h.laser_pose)
-        verified = self.verify_contenders(query, merged)
-        clock.lap('verify')
-        return self.decide(query, verified, clock,
-                           others=[h for h in ranked if h not in todo] + others)
+        verified, more = self.examine(query, found, clock, before=verified)
+        return self.decide(query, verified, clock, others=more + others)
 
     # -- stages -----------------------------------------------------------------------------
     def spectral_hypotheses(self, query: Query,
