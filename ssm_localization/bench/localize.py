@@ -103,7 +103,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              '`ssm_localization replay`')
     parser.add_argument('--paper', action='store_true', help='also run the plain paper pipeline')
     parser.add_argument('--peer', action='store_true',
-                        help='also run the exhaustive correlative search on the same queries')
+                        help='also run the exhaustive correlative search on the same queries '
+                             '(with --foreign: on the foreign scans too, and print its ok rate)')
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--data', default=None, help=DATA_HELP)
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
@@ -374,39 +375,57 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
     ``--foreign-n`` scans a pair (a seeded choice among the place's odd-numbered scans, or
     simulated poses), as recorded. A pair is in the tuning split when both places are. Returns
     the (confidence, right) pairs of every answer by split (never right: the scan is not on
-    that map).
+    that map). With ``--peer`` the exhaustive search localizes the same scans: its ``ok`` rate is
+    what its success on the buildings' own scans costs in trust.
     """
     names = args.foreign_places
     places = {n: load_place(n, data, work, 0 if n in REAL_PLACES else args.foreign_n, seed=7)
               for n in names}
     print(f'foreign scans: {args.foreign_n} scans of each place on the map of each other '
           f'place (ok = a confident pose on a map the scan is not from)', flush=True)
-    counts: dict[str, list[int]] = {}
+    counts: dict[str, list[int]] = {}       # kind -> [ok, answers, the peer's ok]
     graded: dict[str, list[tuple[float, bool]]] = {}
     for a in names:
         grid = places[a].grid
         localizer = once(a, 'ssm', lambda: GlobalLocalizer(build_index(grid, index_cfg),
                                                            loc_cfg))
-        cells = []
+        peer = (once(a, 'peer', lambda: ExhaustiveLocalizer(localizer.index, ours=localizer))
+                if args.peer else None)
+        cells, peer_cells = [], []
         for b in names:
             if not foreign(a, b):
                 continue
             got = list(answers_on(localizer, a, places[b], limit=args.foreign_n, seed=args.seed))
             ok = sum(x.ok for x in got)
+            peer_ok = (sum(x.ok for x in answers_on(peer, a, places[b], limit=args.foreign_n,
+                                                    seed=args.seed))
+                       if peer is not None else 0)
             kind = ('real' if a in REAL_PLACES and b in REAL_PLACES else 'simulated') + \
                    (' tuning' if split_of(a) == split_of(b) == 'tuning' else ' validation')
-            c = counts.setdefault(kind, [0, 0])
+            c = counts.setdefault(kind, [0, 0, 0])
             c[0] += ok
             c[1] += len(got)
+            c[2] += peer_ok
             split = 'tuning' if split_of(a) == split_of(b) == 'tuning' else 'validation'
             graded.setdefault(split, []).extend((x.loc.confidence, False) for x in got)
             cells.append(f'{b} {ok}')
+            peer_cells.append(f'{b} {peer_ok}')
         print(f'  map {a:16s} [{split_of(a)[:5]}] ok of {args.foreign_n}: ' + ', '.join(cells),
               flush=True)
-    total = [sum(c[0] for c in counts.values()), sum(c[1] for c in counts.values())]
-    for kind, (ok, n) in sorted(counts.items()):
+        if peer is not None:
+            print(f'  map {a:16s} exhaustive search, ok of {args.foreign_n}: '
+                  + ', '.join(peer_cells), flush=True)
+    total = [sum(c[k] for c in counts.values()) for k in range(3)]
+    for kind, (ok, n, peer_ok) in sorted(counts.items()):
         print(f'foreign pairs, {kind} (map and scans both tuning, else validation): ok '
-              f'{ok} of {n} = {ok / max(n, 1):.2%}', flush=True)
+              f'{ok} of {n} = {ok / max(n, 1):.2%}' + _peer_rate(args.peer, peer_ok, n),
+              flush=True)
     print(f'foreign pairs, all: ok {total[0]} of {total[1]} = '
-          f'{total[0] / max(total[1], 1):.2%}', flush=True)
+          f'{total[0] / max(total[1], 1):.2%}' + _peer_rate(args.peer, total[2], total[1]),
+          flush=True)
     return graded
+
+
+def _peer_rate(shown: bool, ok: int, n: int) -> str:
+    """Return the exhaustive search's foreign ``ok`` rate for a summary line ('' without it)."""
+    return f'; exhaustive search: ok {ok} of {n} = {ok / max(n, 1):.2%}' if shown else ''

@@ -135,7 +135,8 @@ def answers_on(localizer: GlobalLocalizer, map_name: str, place: Place,
     """
     Localize the scans of ``place`` on ``localizer``'s map (that of ``map_name``).
 
-    Own scans are labelled against their truth; foreign ones are never right. ``limit`` > 0
+    ``localizer``: anything with ``localize_scan`` (the exhaustive search of ``bench/peer.py``
+    too). Own scans are labelled against their truth; foreign ones are never right. ``limit`` > 0
     takes that many of the place's scans (a seeded random choice, the same for every map).
     """
     own = map_name == place.name

@@ -275,3 +275,26 @@ def test_bench_track_prints_both_sequences_and_the_targets(tmp_path, capsys):
     assert sorted(p.name for p in (tmp_path / 'plots').iterdir()) == [
         'track_aces_kidnap.png', 'track_aces_real.png']
     assert (tmp_path / 'work' / 'aces_even.yaml').is_file()
+
+
+def test_bench_localize_prints_the_foreign_ok_rate_of_both_searches(tmp_path, capsys):
+    # three simulated places, two scans of each on the maps of the two others; with --peer the
+    # exhaustive search localizes the same foreign scans and its ok rate is printed beside ours
+    data = shared_data()
+    rc = main(['bench', 'localize', '--sets', 'turtlebot3_world', '-n', '3', '--foreign',
+               '--foreign-places', 'depot', 'turtlebot3_world', 'empty_room', '--foreign-n', '2',
+               '--peer', '--data', str(data), '--work', str(tmp_path / 'work')])
+    out = capsys.readouterr().out
+    assert rc == 0
+    maps = re.findall(r'map (\w+) +\[\w+\] ok of 2: (.*)', out)
+    peers = re.findall(r'map (\w+) +exhaustive search, ok of 2: (.*)', out)
+    assert [m for m, _ in maps] == [m for m, _ in peers] == ['depot', 'turtlebot3_world',
+                                                             'empty_room'], out
+    for (_, ours), (_, theirs) in zip(maps, peers):
+        assert len(ours.split(', ')) == len(theirs.split(', ')) == 2
+    total = re.search(r'foreign pairs, all: ok (\d+) of (\d+) = [0-9.]+%; exhaustive search: '
+                      r'ok (\d+) of (\d+) = [0-9.]+%', out)
+    assert total, out
+    assert int(total.group(2)) == int(total.group(4)) == 12
+    assert int(total.group(3)) == sum(int(c.rsplit(' ', 1)[1]) for _, t in peers
+                                      for c in t.split(', '))
