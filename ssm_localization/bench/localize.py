@@ -383,7 +383,7 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
               for n in names}
     print(f'foreign scans: {args.foreign_n} scans of each place on the map of each other '
           f'place (ok = a confident pose on a map the scan is not from)', flush=True)
-    counts: dict[str, list[int]] = {}       # kind -> [ok, answers, the peer's ok]
+    counts: dict[str, Counter] = {}          # kind -> answers, ours ok, the peer's ok
     graded: dict[str, list[tuple[float, bool]]] = {}
     for a in names:
         grid = places[a].grid
@@ -402,10 +402,7 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
                        if peer is not None else 0)
             kind = ('real' if a in REAL_PLACES and b in REAL_PLACES else 'simulated') + \
                    (' tuning' if split_of(a) == split_of(b) == 'tuning' else ' validation')
-            c = counts.setdefault(kind, [0, 0, 0])
-            c[0] += ok
-            c[1] += len(got)
-            c[2] += peer_ok
+            counts.setdefault(kind, Counter()).update(n=len(got), ok=ok, peer=peer_ok)
             split = 'tuning' if split_of(a) == split_of(b) == 'tuning' else 'validation'
             graded.setdefault(split, []).extend((x.loc.confidence, False) for x in got)
             cells.append(f'{b} {ok}')
@@ -415,14 +412,11 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
         if peer is not None:
             print(f'  map {a:16s} exhaustive search, ok of {args.foreign_n}: '
                   + ', '.join(peer_cells), flush=True)
-    total = [sum(c[k] for c in counts.values()) for k in range(3)]
-    for kind, (ok, n, peer_ok) in sorted(counts.items()):
-        print(f'foreign pairs, {kind} (map and scans both tuning, else validation): ok '
-              f'{ok} of {n} = {ok / max(n, 1):.2%}' + _peer_rate(args.peer, peer_ok, n),
-              flush=True)
-    print(f'foreign pairs, all: ok {total[0]} of {total[1]} = '
-          f'{total[0] / max(total[1], 1):.2%}' + _peer_rate(args.peer, total[2], total[1]),
-          flush=True)
+    total = sum(counts.values(), Counter())
+    for kind, c in [*sorted(counts.items()), ('all', total)]:
+        what = kind if kind == 'all' else f'{kind} (map and scans both tuning, else validation)'
+        print(f'foreign pairs, {what}: ok {c["ok"]} of {c["n"]} = {c["ok"] / max(c["n"], 1):.2%}'
+              + _peer_rate(args.peer, c['peer'], c['n']), flush=True)
     return graded
 
 
