@@ -31,7 +31,8 @@ sensors (``io/sensors.py``: range cut to 3.5 / 12 m, field of view cut to 90 / 1
 ``--foreign`` localizes ``--foreign-n`` scans of every place on the map of every other place
 (:func:`run_foreign`: negative controls, never right) and prints the ``ok`` rates. At the end the
 reliability of the reported confidence per split (every answer of the run, foreign ones
-included), drawn by ``--reliability PNG``.
+included), drawn by ``--reliability PNG``; ``--answers CSV`` writes every one of those answers with
+what decided it and its evidence (``bench/answers.py``).
 """
 from __future__ import annotations
 
@@ -44,6 +45,7 @@ import time
 
 import numpy as np
 
+from .answers import AnswerLog
 from .campus import campus_map, office_30m, site_queries, SiteQueries, write_query_bag
 from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer
@@ -122,6 +124,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--reliability', metavar='PNG',
                         help='write the reliability diagram (reported confidence vs observed '
                              'precision, per split) of every answer of the run')
+    parser.add_argument('--answers', metavar='CSV',
+                        help='write every answer of the run (own scans through every sensor, '
+                             'foreign scans, campus): set, split, sensor, status, what decided '
+                             'it, confidence, right, errors and the evidence features')
 
 
 def _hypothesis_right(localizer: GlobalLocalizer, h: Hypothesis, truth: Pose2) -> bool:
@@ -182,13 +188,17 @@ class SetRun:
     spectral_found: int
 
 
-def run_set(localizer, scans, truth: dict, breakdown: bool = True) -> SetRun:
+def run_set(localizer, scans, truth: dict, breakdown: bool = True,
+            log: AnswerLog | None = None, **labels: str) -> SetRun:
+    """Localize ``scans``; with ``log``, add each answer to it with the ``labels``."""
     rows, covered, stages, spectral = [], [], Counter(), 0
     for scan in scans:
         gt = truth.get(scan.stamp)
         loc = localizer.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
                                       scan.range_min, scan.range_max)
         rows.append(ResultRow.from_localization(scan.stamp, loc, gt))
+        if log is not None:
+            log.add(loc, gt, **labels)
         if gt is None:
             continue
         if loc.status == OK and within_success(loc.pose, gt):
@@ -247,12 +257,13 @@ def run(args: argparse.Namespace) -> int:
             built[map_name, kind] = make()
         return built[map_name, kind]
 
+    log = AnswerLog() if args.answers else None
     pooled: dict[str, list[ResultRow]] = {}
     sensed: dict[tuple[str, str], list[ResultRow]] = {}
     for name in sets:
         t0 = time.perf_counter()
         if name == 'campus':
-            run_campus(args, data, work, index_cfg, loc_cfg, pooled)
+            run_campus(args, data, work, index_cfg, loc_cfg, pooled, log)
             print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
             continue
         if name == 'office_30m':
@@ -277,7 +288,9 @@ def run(args: argparse.Namespace) -> int:
         localizer = once(map_name, 'ssm',
                          lambda: GlobalLocalizer(build_index(grid, index_cfg), loc_cfg))
         index = localizer.index
-        ours = run_set(localizer, scans, truth)
+        labels = {'set': name, 'split': split_of(name), 'kind': 'own', 'map': map_name,
+                  'source': map_name}
+        ours = run_set(localizer, scans, truth, log=log, sensor='full', **labels)
         print(_line(name, 'ssm', ours), flush=True)
         print(_breakdown(ours), flush=True)
         pooled.setdefault(split_of(name), []).extend(ours.rows)
@@ -285,7 +298,8 @@ def run(args: argparse.Namespace) -> int:
             if sensor == 'full':
                 continue
             limits = EVERYDAY_SENSORS[sensor]
-            weak = run_set(localizer, [limits.apply(s) for s in scans], truth, breakdown=False)
+            weak = run_set(localizer, [limits.apply(s) for s in scans], truth, breakdown=False,
+                           log=log, sensor=sensor, **labels)
             print(_line(f'{name}+{sensor}', 'ssm', weak, split_of(name)), flush=True)
             sensed.setdefault((split_of(name), sensor), []).extend(weak.rows)
         if args.plot_dir:
@@ -319,7 +333,8 @@ def run(args: argparse.Namespace) -> int:
     for (split, _), rows in sensed.items():
         graded[split] += [(r.confidence, r.correct) for r in rows]
     if args.foreign:
-        for split, pairs in run_foreign(args, data, work, once, index_cfg, loc_cfg).items():
+        for split, pairs in run_foreign(args, data, work, once, index_cfg, loc_cfg,
+                                        log).items():
             graded.setdefault(split, []).extend(pairs)
     tables = {}
     for split, pairs in sorted(graded.items(), reverse=True):
@@ -331,11 +346,13 @@ def run(args: argparse.Namespace) -> int:
             print(format_reliability(tables[split]), flush=True)
     if args.reliability and tables:
         print(f'wrote {plot_reliability(tables, args.reliability)}')
+    if log is not None:
+        print(f'wrote {log.write(args.answers)} ({len(log.rows)} answers)')
     return 0
 
 
 def run_campus(args: argparse.Namespace, data: Path, work: Path, index_cfg, loc_cfg,
-               pooled: dict[str, list[ResultRow]]) -> None:
+               pooled: dict[str, list[ResultRow]], log: AnswerLog | None = None) -> None:
     """
     Localize ``--campus-n`` queries of every building of the campus on the campus map.
 
@@ -353,7 +370,9 @@ def run_campus(args: argparse.Namespace, data: Path, work: Path, index_cfg, loc_
         q = site_queries(data, site, args.campus_n, args.seed)
         queries.append(q)
         truth = dict(zip((s.stamp for s in q.scans), q.truth))
-        one = run_set(localizer, q.scans, truth)
+        one = run_set(localizer, q.scans, truth, log=log, set=f'campus:{site.name}',
+                      split=split_of(site.name), sensor='full', kind='own', map='campus',
+                      source=site.name)
         print(_line(f'campus:{site.name}', 'ssm', one, split_of(site.name)), flush=True)
         pooled.setdefault(split_of(site.name), []).extend(one.rows)
         runs.append(one)
@@ -368,7 +387,7 @@ def run_campus(args: argparse.Namespace, data: Path, work: Path, index_cfg, loc_
 
 
 def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cfg,
-                loc_cfg) -> dict[str, list[tuple[float, bool]]]:
+                loc_cfg, log: AnswerLog | None = None) -> dict[str, list[tuple[float, bool]]]:
     """
     Localize the scans of every place on the map of every other place; print the ok rates.
 
@@ -405,6 +424,10 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
             counts.setdefault(kind, Counter()).update(n=len(got), ok=ok, peer=peer_ok)
             split = 'tuning' if split_of(a) == split_of(b) == 'tuning' else 'validation'
             graded.setdefault(split, []).extend((x.loc.confidence, False) for x in got)
+            if log is not None:
+                for x in got:
+                    log.add(x.loc, None, set=f'{b}@{a}', split=split, sensor='full',
+                            kind='foreign', map=a, source=b)
             cells.append(f'{b} {ok}')
             peer_cells.append(f'{b} {peer_ok}')
         print(f'  map {a:16s} [{split_of(a)[:5]}] ok of {args.foreign_n}: ' + ', '.join(cells),

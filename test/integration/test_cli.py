@@ -277,6 +277,45 @@ def test_bench_track_prints_both_sequences_and_the_targets(tmp_path, capsys):
     assert (tmp_path / 'work' / 'aces_even.yaml').is_file()
 
 
+def test_bench_localize_writes_every_answer_it_graded(tmp_path, capsys):
+    # --answers: one CSV row per answer the reliability table pools (own scans through every
+    # sensor, foreign scans), with what decided it; the rows agree with the printed figures
+    data = shared_data()
+    out_csv = tmp_path / 'answers.csv'
+    rc = main(['bench', 'localize', '--sets', 'turtlebot3_world', 'depot_clutter', '-n', '3',
+               '--sensors', 'full', 'fov90', '--foreign', '--foreign-places', 'depot',
+               'turtlebot3_world', 'empty_room', '--foreign-n', '2', '--answers', str(out_csv),
+               '--data', str(data), '--work', str(tmp_path / 'work')])
+    out = capsys.readouterr().out
+    assert rc == 0
+    with out_csv.open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 2 * 2 * 3 + 6 * 2, out
+    pooled = {m.group(1): int(m.group(2))
+              for m in re.finditer(r'reliability, (\w+) split \((\d+) answers', out)}
+    assert pooled == {split: sum(r['split'] == split for r in rows)
+                      for split in ('tuning', 'validation')}, out
+    for name, sensor in (('turtlebot3_world', 'full'), ('depot_clutter', 'fov90')):
+        label = re.escape(name if sensor == 'full' else f'{name}+{sensor}')
+        line = re.search(rf'^{label} +ssm .*ok=(\d+) ', out, re.M)
+        mine = [r for r in rows if r['set'] == name and r['sensor'] == sensor]
+        assert line and len(mine) == 3, out
+        assert sum(r['status'] == 'ok' for r in mine) == int(line.group(1))
+    for r in rows:
+        confidence = float(r['confidence'])
+        if r['kind'] == 'foreign':
+            assert r['right'] == '0' and r['map'] != r['source'] and r['error_xy'] == ''
+        if r['status'] == 'ok':
+            assert r['decided_by'] == 'confidence' and confidence >= 0.95
+        if r['decided_by'] == 'rival':
+            assert int(r['look_alikes']) >= 2
+            assert confidence <= 1.0 / int(r['look_alikes']) + 1e-6
+        if r['decided_by'] == 'no pose':
+            assert confidence == 0.0 and r['explained'] == ''
+        else:
+            assert 0.0 <= float(r['explained']) <= 1.0
+
+
 def test_bench_localize_prints_the_foreign_ok_rate_of_both_searches(tmp_path, capsys):
     # three simulated places, two scans of each on the maps of the two others; with --peer the
     # exhaustive search localizes the same foreign scans and its ok rate is printed beside ours
