@@ -426,7 +426,7 @@ class GlobalLocalizer:
         Only on a map of one region (a building). On a campus of several regions the second
         search costs more than the first, every region at further yaws: measured on the campus
         benchmark it found 1.6 points more places but took the p95 latency from 127 to 214 ms
-        (docs/BENCHMARKS.md).
+        (docs/EXPERIMENTS.md).
         """
         cfg = self.config
         if not (cfg.search and cfg.search_more_alignments) or self.regions.count > 1:

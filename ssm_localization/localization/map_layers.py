@@ -74,7 +74,7 @@ def search_coarsening(cells: int, resolution: float, cfg: LocalizerConfig) -> in
     ``search_cell`` in map cells (at least one), doubled while the search grid would hold more
     than ``search_max_cells`` cells: the search's cost grows with its cells. Powers of two,
     because on the campus cells two and four times as wide kept the right answers and three
-    times as wide lost some (docs/BENCHMARKS.md).
+    times as wide lost some (CHANGELOG.rst, the search grid cap).
     """
     coarsen = max(1, round(cfg.search_cell / resolution))
     if cfg.search_max_cells > 0:
