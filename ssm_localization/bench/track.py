@@ -21,7 +21,10 @@ a scan alone is not ``ok`` and how often the tracker is right there: the corrido
 ``--no-odom`` tracking without odometry, ``--max-range R`` also tracks the real sequence with
 every reading beyond R metres made a no-return (a short laser: long corridors a single scan
 cannot place; add ``--single`` to see how often), ``--plot-dir`` one figure per sequence
-(``plot_track``).
+(``plot_track``). At the end the reliability of the tracker's reported confidence per split:
+every answer of the sequences (tracked, coasting, held or relocalized) binned by its confidence
+against the fraction right, as ``bench localize`` does for single scans; ``--reliability PNG``
+draws it.
 """
 from __future__ import annotations
 
@@ -37,7 +40,8 @@ from .data import data_dir, DATA_HELP
 from .localize import REAL_SETS, split_of
 from .places import real_map
 from ..config.params import load_all_configs
-from ..evaluation.plotting import plot_track
+from ..evaluation.calibration import format_reliability, reliability
+from ..evaluation.plotting import plot_reliability, plot_track
 from ..evaluation.replay import replay_scans, summarize
 from ..evaluation.tracking import summarize_track, track_scans, TrackSummary
 from ..io.sequences import (KIDNAP_AFTER, KIDNAP_BEFORE, kidnap_sequence, log_sequence,
@@ -80,6 +84,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--params', help='params YAML applied to every set (index, localizer '
                                          'and tracker sections)')
     parser.add_argument('--plot-dir', help='write one figure per sequence here')
+    parser.add_argument('--reliability', metavar='PNG',
+                        help="write the reliability diagram of the tracker's confidence "
+                             '(reported confidence vs observed precision, per split)')
 
 
 def verdict(ts: TrackSummary) -> str:
@@ -146,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
     sets = list(REAL_SETS) if 'all' in args.sets else args.sets
     data, work = data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg, track_cfg = load_all_configs(args.params)
+    graded: dict[str, list[tuple[float, bool]]] = {}
     for name in sets:
         t0 = time.perf_counter()
         log, grid = real_map(data, work, REAL_SETS[name])
@@ -161,6 +169,8 @@ def run(args: argparse.Namespace) -> int:
                          True))
         for label, seq, odometry in runs:
             rows, ts, noise = _track(localizer, track_cfg, seq, odometry)
+            graded.setdefault(split_of(name, TUNING_SETS), []).extend(
+                (r.confidence, r.correct) for r in rows if r.has_truth)
             print(ts.format(f'{name:6s} {label:7s} [{split_of(name, TUNING_SETS)}]'),
                   flush=True)
             print(verdict(ts), flush=True)
@@ -178,4 +188,13 @@ def run(args: argparse.Namespace) -> int:
             print(random_kidnaps(localizer, track_cfg, real, args.random_kidnaps, args.seed),
                   flush=True)
         print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
+    tables = {}
+    for split, pairs in sorted(graded.items(), reverse=True):
+        confidence, right = zip(*pairs)
+        tables[split] = reliability(confidence, right)
+        print(f"reliability of the tracker's confidence, {split} split ({len(pairs)} answers of "
+              f'the sequences; a bin is judged with at least 50):', flush=True)
+        print(format_reliability(tables[split]), flush=True)
+    if args.reliability and tables:
+        print(f'wrote {plot_reliability(tables, args.reliability)}')
     return 0

@@ -258,7 +258,8 @@ def test_bench_track_prints_both_sequences_and_the_targets(tmp_path, capsys):
     data = shared_data()
     shared_data('carmen', 'aces-corrected.log.gz')
     rc = main(['bench', 'track', '--sets', 'aces', '--scans', '60', '--data', str(data),
-               '--work', str(tmp_path / 'work'), '--plot-dir', str(tmp_path / 'plots')])
+               '--work', str(tmp_path / 'work'), '--plot-dir', str(tmp_path / 'plots'),
+               '--reliability', str(tmp_path / 'rel.png')])
     out = capsys.readouterr().out
     assert rc == 0
     real = next(ln for ln in out.splitlines() if ln.startswith('aces   real'))
@@ -275,6 +276,16 @@ def test_bench_track_prints_both_sequences_and_the_targets(tmp_path, capsys):
     assert sorted(p.name for p in (tmp_path / 'plots').iterdir()) == [
         'track_aces_kidnap.png', 'track_aces_real.png']
     assert (tmp_path / 'work' / 'aces_even.yaml').is_file()
+    # the tracker's confidence against the fraction right: every answer of both sequences
+    # (ACES is a tuning log), binned; the bins' counts add up to them, the ok ones at the top
+    head = re.search(r"reliability of the tracker's confidence, tuning split \((\d+) answers",
+                     out)
+    assert head and int(head.group(1)) == 60 + 36, out
+    bins = re.findall(r'^  (\d\.\d\d)-(\d\.\d\d) +(\d+) +([0-9.]+) +([0-9.]+)', out, re.M)
+    assert sum(int(n) for *_, n, _, _ in bins) == 96, out
+    ok = sum(int(m.group(1)) for m in re.finditer(r' ok=(\d+) ', out))
+    assert sum(int(n) for lo, _, n, _, _ in bins if float(lo) >= 0.9) >= ok
+    assert (tmp_path / 'rel.png').stat().st_size > 0
 
 
 def test_bench_localize_writes_every_answer_it_graded(tmp_path, capsys):
