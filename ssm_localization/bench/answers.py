@@ -21,10 +21,10 @@ from pathlib import Path
 import re
 
 from ..config.confidence import CONFIDENCE_MODEL
-from ..evaluation.replay import within_success
+from ..evaluation.replay import ResultRow
 from ..localization.confidence import feature_values
 from ..localization.localizer import Localization, OK
-from ..transforms import Pose2, wrap_angle
+from ..transforms import Pose2
 
 #: the columns before the features
 LABELS = ('set', 'split', 'sensor', 'kind', 'map', 'source', 'status', 'decided_by',
@@ -70,14 +70,11 @@ class AnswerLog:
         ``truth`` None: a foreign scan (never right) or one without ground truth.
         """
         how, alike = decided_by(loc)
-        right = truth is not None and loc.pose is not None and within_success(loc.pose, truth)
-        err_xy = err_yaw = math.nan
-        if truth is not None and loc.pose is not None:
-            err_xy = math.hypot(loc.pose[0] - truth[0], loc.pose[1] - truth[1])
-            err_yaw = abs(math.degrees(float(wrap_angle(loc.pose[2] - truth[2]))))
+        result = ResultRow.from_localization(math.nan, loc, truth)
+        dx, dy, dyaw = result.errors()
         row = dict(labels, status=loc.status, decided_by=how, look_alikes=alike,
-                   confidence=f'{loc.confidence:.6f}', right=int(right),
-                   error_xy=_num(err_xy), error_yaw_deg=_num(err_yaw),
+                   confidence=f'{loc.confidence:.6f}', right=int(result.correct),
+                   error_xy=_num(math.hypot(dx, dy)), error_yaw_deg=_num(math.degrees(dyaw)),
                    latency_ms=f'{loc.latency_ms:.1f}')
         if loc.evidence is not None:
             values = feature_values(loc.evidence)
