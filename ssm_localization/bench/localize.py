@@ -52,7 +52,7 @@ from .peer import ExhaustiveLocalizer
 from .places import (answers_on, foreign, load_place, real_grid, REAL_PLACES, SIM_PLACES,
                      sim_queries)
 from ..config.params import load_configs
-from ..evaluation.calibration import format_reliability, reliability
+from ..evaluation.calibration import reliability_report
 from ..evaluation.plotting import plot_reliability, plot_replay
 from ..evaluation.replay import ResultRow, summarize, within_success
 from ..io.sensors import EVERYDAY_SENSORS
@@ -336,14 +336,9 @@ def run(args: argparse.Namespace) -> int:
         for split, pairs in run_foreign(args, data, work, once, index_cfg, loc_cfg,
                                         log).items():
             graded.setdefault(split, []).extend(pairs)
-    tables = {}
-    for split, pairs in sorted(graded.items(), reverse=True):
-        if pairs:
-            conf, right = zip(*pairs)
-            tables[split] = reliability(conf, right)
-            print(f'reliability, {split} split ({len(pairs)} answers; a bin is judged with '
-                  f'at least 50):', flush=True)
-            print(format_reliability(tables[split]), flush=True)
+    tables, text = reliability_report(graded)
+    if text:
+        print(text, flush=True)
     if args.reliability and tables:
         print(f'wrote {plot_reliability(tables, args.reliability)}')
     if log is not None:

@@ -40,7 +40,7 @@ from .data import data_dir, DATA_HELP
 from .localize import REAL_SETS, split_of
 from .places import real_map
 from ..config.params import load_all_configs
-from ..evaluation.calibration import format_reliability, reliability
+from ..evaluation.calibration import reliability_report
 from ..evaluation.plotting import plot_reliability, plot_track
 from ..evaluation.replay import replay_scans, summarize
 from ..evaluation.tracking import summarize_track, track_scans, TrackSummary
@@ -188,13 +188,9 @@ def run(args: argparse.Namespace) -> int:
             print(random_kidnaps(localizer, track_cfg, real, args.random_kidnaps, args.seed),
                   flush=True)
         print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
-    tables = {}
-    for split, pairs in sorted(graded.items(), reverse=True):
-        confidence, right = zip(*pairs)
-        tables[split] = reliability(confidence, right)
-        print(f"reliability of the tracker's confidence, {split} split ({len(pairs)} answers of "
-              f'the sequences; a bin is judged with at least 50):', flush=True)
-        print(format_reliability(tables[split]), flush=True)
+    tables, text = reliability_report(graded, "reliability of the tracker's confidence")
+    if text:
+        print(text, flush=True)
     if args.reliability and tables:
         print(f'wrote {plot_reliability(tables, args.reliability)}')
     return 0

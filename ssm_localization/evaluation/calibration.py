@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import minimize
@@ -305,3 +305,22 @@ def format_reliability(bins: list[ReliabilityBin], min_count: int = 50) -> str:
         lines.append(f'  {b.low:.2f}-{b.high:.2f} {b.count:6d}   {b.mean_confidence:.3f}     '
                      f'{b.observed:.3f}   {b.gap:+.3f}{mark}')
     return '\n'.join(lines)
+
+
+def reliability_report(graded: Mapping[str, Sequence[tuple[float, bool]]],
+                       what: str = 'reliability') -> tuple[dict[str, list[ReliabilityBin]], str]:
+    """
+    Return the reliability bins of each split's ``(confidence, right)`` answers, and their text.
+
+    The splits in reverse order of their names (validation before tuning), each headed by
+    ``what``, its name and its count; a split without answers is left out.
+    """
+    tables, parts = {}, []
+    for split, pairs in sorted(graded.items(), reverse=True):
+        if not pairs:
+            continue
+        confidence, right = zip(*pairs)
+        tables[split] = reliability(confidence, right)
+        parts += [f'{what}, {split} split ({len(pairs)} answers; a bin is judged with at least '
+                  f'50):', format_reliability(tables[split])]
+    return tables, '\n'.join(parts)
