@@ -43,7 +43,7 @@ def decided_by(loc: Localization) -> tuple[str, int]:
     rule for an undetermined position or a view too small; ``implausible``: the rules for too
     much seen through walls or too little explained; ``no pose``: no hypothesis survived.
     """
-    if loc.pose is None or loc.evidence is None:
+    if loc.pose is None:
         return 'no pose', 0
     message = loc.message
     alike = _LOOK_ALIKES.match(message)

@@ -45,7 +45,7 @@ import time
 
 import numpy as np
 
-from .answers import AnswerLog
+from .answers import AnswerLog, decided_by
 from .campus import campus_map, office_30m, site_queries, SiteQueries, write_query_bag
 from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer
@@ -158,13 +158,12 @@ def miss_stage(localizer: GlobalLocalizer, loc: Localization, truth: Pose2) -> s
         return f'right one refined, not verified ({loc.status})'
     if not within_success(loc.pose, truth):
         return f'ranked below a wrong pose ({loc.status})'
+    how, _ = decided_by(loc)
     if loc.status == AMBIGUOUS:
-        if loc.message.startswith('degenerate'):
-            return 'right but ambiguous: degenerate geometry'
-        if loc.message.startswith('low confidence'):
-            return 'right but ambiguous: confidence below min_confidence'
-        return 'right but ambiguous: a rival within the margin'
-    if loc.message.startswith('the best pose is more likely wrong'):
+        return {'degenerate': 'right but ambiguous: degenerate geometry',
+                'confidence': 'right but ambiguous: confidence below min_confidence'}.get(
+                    how, 'right but ambiguous: a rival within the margin')
+    if how == 'confidence':
         return 'right but failed: confidence below one half'
     return 'right but failed: explains too little'
 
@@ -414,10 +413,9 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
             peer_ok = (sum(x.ok for x in answers_on(peer, a, places[b], limit=args.foreign_n,
                                                     seed=args.seed))
                        if peer is not None else 0)
-            kind = ('real' if a in REAL_PLACES and b in REAL_PLACES else 'simulated') + \
-                   (' tuning' if split_of(a) == split_of(b) == 'tuning' else ' validation')
-            counts.setdefault(kind, Counter()).update(n=len(got), ok=ok, peer=peer_ok)
             split = 'tuning' if split_of(a) == split_of(b) == 'tuning' else 'validation'
+            kind = ('real' if a in REAL_PLACES and b in REAL_PLACES else 'simulated') + ' ' + split
+            counts.setdefault(kind, Counter()).update(n=len(got), ok=ok, peer=peer_ok)
             graded.setdefault(split, []).extend((x.loc.confidence, False) for x in got)
             if log is not None:
                 for x in got:
