@@ -348,3 +348,31 @@ def test_bench_localize_prints_the_foreign_ok_rate_of_both_searches(tmp_path, ca
     assert int(total.group(2)) == int(total.group(4)) == 12
     assert int(total.group(3)) == sum(int(c.rsplit(' ', 1)[1]) for _, t in peers
                                       for c in t.split(', '))
+    # and the exhaustive search with this package's verdict, on the same scans
+    fulls = re.findall(r'map (\w+) +exhaustive search with this verdict, ok of 2: (.*)', out)
+    assert [m for m, _ in fulls] == [m for m, _ in maps], out
+    full = re.search(r'foreign pairs, all: .*; with this verdict: ok (\d+) of (\d+) = ', out)
+    assert full and int(full.group(2)) == 12, out
+    assert int(full.group(1)) == sum(int(c.rsplit(' ', 1)[1]) for _, t in fulls
+                                     for c in t.split(', '))
+
+
+def test_bench_localize_peer_compares_both_exhaustive_searches(tmp_path, capsys):
+    # --peer on a building's own scans: the exhaustive search with its own verdict and with this
+    # package's (every yaw searched, the rest the package's), each compared on the same queries
+    rc = main(['bench', 'localize', '--sets', 'turtlebot3_world', '-n', '4', '--peer',
+               '--data', str(shared_data()), '--work', str(tmp_path / 'work')])
+    out = capsys.readouterr().out
+    assert rc == 0
+    lines = {m.group(1): (int(m.group(2)), float(m.group(3)))
+             for m in re.finditer(r'^turtlebot3_world +(ssm|peer|peer-v) +\[valid\] n= +(\d+) '
+                                  r'.*\| success ([0-9.]+)%', out, re.M)}
+    assert set(lines) == {'ssm', 'peer', 'peer-v'} and {n for n, _ in lines.values()} == {4}, out
+    for what, label in (('peer', 'peer'), ('the exhaustive search with this verdict', 'peer-v')):
+        line = re.search(rf'^  vs {what}: success ([0-9.]+)% vs ([0-9.]+)%.* -> success within '
+                         r'1 point \(([-+][0-9.]+)\) (yes|NO)', out, re.M)
+        assert line, out
+        assert float(line.group(2)) == lines[label][1]
+        gap = float(line.group(1)) - float(line.group(2))
+        assert abs(float(line.group(3)) - gap) < 0.051
+        assert (line.group(4) == 'yes') == (gap >= -1.0)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from ssm_localization import (build_index, GlobalLocalizer, IndexConfig, Localization,
                               LocalizerConfig, read_bag, simulate, SimulationConfig)
+from ssm_localization.bench.peer import FullSearchLocalizer
 from ssm_localization.config.confidence import CONFIDENCE_MODEL
 from ssm_localization.localization.evidence import Evidence
 from ssm_localization.localization.localizer import Hypothesis, STATUSES, verdict, vicinity_score
@@ -201,6 +202,33 @@ def test_a_second_look_searches_further_alignments_when_the_answer_is_not_ok(dep
     again = GlobalLocalizer(index, dataclasses.replace(localizer.config,
                                                        search_more_alignments=0))
     assert plain.status == 'ok' and again.localize_scan(*args).pose == plain.pose
+
+
+def test_the_full_search_peer_searches_every_yaw_with_the_same_verdict(depot, localizer):
+    """
+    ``bench localize --peer``'s second peer: the package's localizer searching every yaw.
+
+    With a blind first look (no alignment yaw, no seed, no second look) the package fails; the
+    peer built beside it, on the same layers and with the same settings, searches the full turn
+    and finds the place, its verdict the package's.
+    """
+    bag, index = depot
+    blind = dataclasses.replace(localizer.config, search_alignments=0, fine_min_inliers=10 ** 6,
+                                search_more_alignments=0)
+    s, truth = bag.scans[0], _truth(depot)
+    args = (s.ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max)
+    ours = GlobalLocalizer(index, blind)
+    assert ours.localize_scan(*args).status == 'failed'
+    full = FullSearchLocalizer(ours)
+    assert full.grid is ours.grid and full.caster is ours.caster
+    assert full.confidence_model is ours.confidence_model
+    plan = full.search_plan(ours.prepare_scan(*args), [])
+    assert len(plan.yaws) == 360 and plan.allowed.all()
+    found = full.localize_scan(*args)
+    _assert_close(found, truth)
+    assert found.confidence >= blind.min_confidence
+    # the package's own settings are left as they were
+    assert ours.config is blind and ours.localize_scan(*args).status == 'failed'
 
 
 def test_refine_estimates_the_wall_offset_of_ray_cast_scans(depot, localizer, query):
