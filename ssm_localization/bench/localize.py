@@ -32,10 +32,10 @@ searching every yaw over the whole map, so that the difference is only in the pl
 ``--sensors`` localizes every set again through everyday sensors (``io/sensors.py``: range cut
 to 3.5 / 12 m, field of view cut to 90 / 120 deg); ``--foreign`` localizes ``--foreign-n``
 scans of every place on the map of every other place (:func:`run_foreign`: negative controls,
-never right) and prints the ``ok`` rates. At the end the
-reliability of the reported confidence per split (every answer of the run, foreign ones
-included), drawn by ``--reliability PNG``; ``--answers CSV`` writes every one of those answers with
-what decided it and its evidence (``bench/answers.py``).
+never right) and prints the ``ok`` rates. At the end the reliability of the reported confidence
+per split (every answer of the run, foreign ones included), drawn by ``--reliability PNG``;
+``--answers CSV`` writes every one of those answers with what decided it and its evidence
+(``bench/answers.py``).
 """
 from __future__ import annotations
 
