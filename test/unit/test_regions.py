@@ -7,6 +7,7 @@ from helpers import BAGS
 import numpy as np
 import pytest
 from ssm_localization import build_index, GlobalLocalizer, OccupancyMap, read_bag
+from ssm_localization.bench.peer import FullSearchLocalizer
 from ssm_localization.localization.correlative import CorrelativeResult
 from ssm_localization.localization.localizer import _by_correlation
 from ssm_localization.localization.regions import pick_leaves, with_region_bests
@@ -108,6 +109,23 @@ def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus
         old = list(wider[r][:cfg.search_alignments]) + ([0.3] if r == seeded else [])
         assert centres and apart(centres, old).min() > cfg.search_step
         assert apart(centres, first.yaws[first.allowed[:, r]]).min() > 0.0
+
+
+def test_the_full_search_peer_searches_every_yaw_in_every_region(campus):
+    """``bench localize --peer``'s package peer: the whole turn in both buildings, one answer."""
+    occ, loc = campus
+    truth = (68.0, 9.0, 2.0)
+    angles = beam_angles(360)
+    ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([truth]), angles,
+                       30.0)[0]
+    args = (ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
+    full = FullSearchLocalizer(loc)
+    plan = full.search_plan(loc.prepare_scan(*args), [])
+    assert plan.allowed.shape == (360, loc.regions.count) and plan.allowed.all()
+    assert plan.labels is loc.regions.labels
+    found = full.localize_scan(*args)
+    assert found.status == 'ok', found.message
+    assert math.hypot(found.pose[0] - truth[0], found.pose[1] - truth[1]) < 0.05
 
 
 def test_one_building_is_one_region_searched_as_before():
