@@ -48,6 +48,17 @@ def campus():
     return occ, GlobalLocalizer(build_index(occ))
 
 
+TURNED_TRUTH = (68.0, 9.0, 2.0)          # inside the turned building of `campus`
+
+
+def _turned_scan(occ: OccupancyMap) -> tuple[np.ndarray, np.ndarray]:
+    """Return the beam angles and ranges of a 360-beam scan at :data:`TURNED_TRUTH`."""
+    angles = beam_angles(360)
+    ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([TURNED_TRUTH]), angles,
+                       30.0)[0]
+    return angles, ranges
+
+
 def test_buildings_apart_are_regions_with_their_own_walls(campus):
     occ, loc = campus
     assert loc.regions.count == 2
@@ -64,10 +75,8 @@ def test_buildings_apart_are_regions_with_their_own_walls(campus):
 
 def test_scan_of_the_turned_building_is_searched_at_its_yaw_and_found(campus):
     occ, loc = campus
-    truth = (68.0, 9.0, 2.0)                # inside the turned building
-    angles = beam_angles(360)
-    ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([truth]), angles,
-                       30.0)[0]
+    truth = TURNED_TRUTH
+    angles, ranges = _turned_scan(occ)
     ranges = ranges + np.random.default_rng(0).normal(0.0, 0.01, len(ranges))
     query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
     plan = loc.search_plan(query, [])
@@ -82,10 +91,7 @@ def test_scan_of_the_turned_building_is_searched_at_its_yaw_and_found(campus):
 
 def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus):
     occ, loc = campus
-    truth = (68.0, 9.0, 2.0)
-    angles = beam_angles(360)
-    ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([truth]), angles,
-                       30.0)[0]
+    angles, ranges = _turned_scan(occ)
     query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
     cfg = loc.config
     seeds = [(10.0, 10.0, 0.3)]
@@ -114,10 +120,8 @@ def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus
 def test_the_full_search_peer_searches_every_yaw_in_every_region(campus):
     """``bench localize --peer``'s package peer: the whole turn in both buildings, one answer."""
     occ, loc = campus
-    truth = (68.0, 9.0, 2.0)
-    angles = beam_angles(360)
-    ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([truth]), angles,
-                       30.0)[0]
+    truth = TURNED_TRUTH
+    angles, ranges = _turned_scan(occ)
     args = (ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
     full = FullSearchLocalizer(loc)
     plan = full.search_plan(loc.prepare_scan(*args), [])
