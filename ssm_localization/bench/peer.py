@@ -115,7 +115,8 @@ class FullSearchLocalizer(GlobalLocalizer):
     Built beside ``ours`` on the same map layers (nothing is built again). Its correlative
     search covers a full turn every ``angular_step`` in every region, its time budget is
     ``budget_s`` (a bound for a runaway search, not a limit any search here reaches), and there
-    is no second look (a search at further yaws would find nothing new). Everything else is
+    is no second look (``search_more_alignments`` 0: a search at further yaws would find
+    nothing new). Everything else is
     the package's: the pose votes' hypotheses, which leaves go on (``search_keep``,
     ``search_rivals``), the refinement, the ray casting and the verdict with its calibrated
     confidence.
@@ -125,7 +126,8 @@ class FullSearchLocalizer(GlobalLocalizer):
                  budget_s: float = 60.0) -> None:
         # not GlobalLocalizer.__init__: the map layers of `ours` are shared, not built again
         self.__dict__.update(ours.__dict__)
-        self.config = dataclasses.replace(ours.config, search_budget=budget_s)
+        self.config = dataclasses.replace(ours.config, search_budget=budget_s,
+                                          search_more_alignments=0)
         n = max(int(round(2.0 * math.pi / angular_step)), 1)
         self._full_turn = 2.0 * math.pi * np.arange(n) / n
 
@@ -133,7 +135,3 @@ class FullSearchLocalizer(GlobalLocalizer):
         """Return every yaw of the full turn in every region."""
         allowed = np.ones((len(self._full_turn), self.regions.count), bool)
         return SearchPlan(self._full_turn, allowed, self.regions.labels)
-
-    def second_look(self, *args, **kwargs) -> None:
-        """Return None: every yaw was searched the first time."""
-        return None

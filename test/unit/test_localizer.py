@@ -222,6 +222,7 @@ def test_the_full_search_peer_searches_every_yaw_with_the_same_verdict(depot, lo
     full = FullSearchLocalizer(ours)
     assert full.grid is ours.grid and full.caster is ours.caster
     assert full.confidence_model is ours.confidence_model
+    assert full.config.search_more_alignments == 0       # no second look: every yaw searched
     plan = full.search_plan(ours.prepare_scan(*args), [])
     assert len(plan.yaws) == 360 and plan.allowed.all()
     found = full.localize_scan(*args)
