@@ -111,7 +111,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--paper', action='store_true', help='also run the plain paper pipeline')
     parser.add_argument('--peer', action='store_true',
                         help='also run the exhaustive correlative search on the same queries, '
-                             'with its own verdict (peer) and with this package\'s (peer-v); '
+                             "with its own verdict (peer) and with this package's (peer-v); "
                              'with --foreign: on the foreign scans too, and print their ok rates')
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--data', default=None, help=DATA_HELP)
