@@ -247,6 +247,11 @@ class IndexSource:
         topic_map = TopicMap(occ, occ.checksum())
         with self._lock:
             self._latest = topic_map
+        self._take(topic_map)
+
+    def _take(self, topic_map: TopicMap) -> None:
+        """Decide what a map from the topic needs: wait for the file, nothing, or an index."""
+        with self._lock:
             loading, served = self._loading, self._served
         if loading:
             self._log.info(f'map on {self._topic} received while {self._path} loads: compared '
@@ -294,7 +299,6 @@ class IndexSource:
             self._serve(index, MAP_TOPIC, getattr(index.map, 'frame_id', '') or '')
             return
         with self._lock:
-            self._loading = False
             latest = self._latest
         differences = parameter_differences(index.config, self._work.index_config)
         if differences:
@@ -309,10 +313,18 @@ class IndexSource:
                               'map topic, the index file will be rewritten')
             with self._lock:
                 self._write_to = self._path
+                self._loading = False
             self._index(latest)
             return
         frame = latest.frame if latest is not None else getattr(index.map, 'frame_id', '')
         self._serve(index, job.label, frame or '')
+        # LOADING ends only once the file is served: a map that came meanwhile waited for it
+        # and is compared with it now (another map is indexed, with a warning)
+        with self._lock:
+            self._loading = False
+            arrived = self._latest
+        if arrived is not None and arrived is not latest:
+            self._take(arrived)
 
     def _failed(self, job: BuildJob, exc: BaseException) -> None:
         """Builder: a job failed (LOADING -> WAITING or INDEXING; INDEXING -> as before)."""

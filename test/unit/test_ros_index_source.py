@@ -162,6 +162,27 @@ def test_map_differing_from_a_served_file_index_replaces_it_with_a_warning(harne
     assert h.saved == ['C']
 
 
+def test_a_map_arriving_while_the_file_index_is_served_is_compared_with_it(harness_factory):
+    # the file's index loaded with no map yet; another map arrives while its localizer is made
+    # (between the load and READY): it waits for the file and is then compared with it
+    h = harness_factory('A')
+    arrived = []
+
+    def localizer(index):
+        if not arrived:
+            arrived.append(True)
+            h.source.on_map(FakeMap('D'))
+        return f'localizer({index.map.cells})'
+
+    object.__setattr__(h.work, 'localizer', localizer)
+    h.source.start()
+    h.settle()
+    assert [s.checksum[:1] for s in h.ready] == ['A', 'D'] and h.built == ['D']
+    assert h.ready[-1].source == 'map topic'
+    assert any('is not the map' in w for w in h.log.warnings()), h.log.lines
+    assert h.saved == ['D'] and h.path.read_text() == 'D'     # the stale file is rewritten
+
+
 def test_corrupt_file_falls_back_to_the_map_topic(harness_factory):
     h = harness_factory('corrupt')
     h.source.start()
