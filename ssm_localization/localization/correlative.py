@@ -32,8 +32,8 @@ from ..transforms import wrap_angle
 #: likelihood values are stored as uint8 (0..255)
 _SCALE = 255.0
 #: the search expands the best windows of its pool, about this many batches of them, before it
-#: looks at the rest again
-_HOT_BATCHES = 4
+#: looks at the rest again (``search``'s default ``hot_batches``)
+HOT_BATCHES = 4
 #: windows scored at a time, so that their cell indices (8 bytes per window and point) stay in
 #: the cache; of 1024-32768 on the campus's captured searches 8192 was the fastest
 _SCORE_CHUNK = 8192
@@ -150,7 +150,7 @@ class CorrelativeGrid:
     def search(self, points: np.ndarray, *, yaws=None, angular_step: float = math.radians(1.0),
                window: tuple[float, float, float, float] | None = None, min_score: float = 0.5,
                ratio: float = 1.0, max_leaves: int = 256, batch: int = 2048,
-               budget_s: float | None = None,
+               hot_batches: int = HOT_BATCHES, budget_s: float | None = None,
                regions: tuple[np.ndarray, np.ndarray] | None = None,
                region_ratio: float | None = None) -> CorrelativeResult:
         """
@@ -162,7 +162,9 @@ class CorrelativeGrid:
         best first, at most ``max_leaves``. ``budget_s`` stops the search early (``complete``
         False) once that much time has passed. ``batch``: the most promising windows expanded per
         numpy step (larger batches: fewer Python steps, a little more work each; 2048 cut the
-        search's p95 by a quarter on the real maps against 512, with the same answers).
+        search's p95 by a quarter on the real maps against 512, with the same answers);
+        ``hot_batches``: about this many batches of the best windows are expanded before the
+        rest of the pool is pruned and split again (the leaves are the same for any two).
         ``regions``: ``(labels, allowed)``, the region of each top-level window (-1: none) and
         which yaws are searched in which region ((K, R) bool): yaw ``k`` only in the windows of
         the regions ``r`` with ``allowed[k, r]`` (``regions.py``); default: every yaw everywhere.
@@ -172,6 +174,9 @@ class CorrelativeGrid:
         fairly well cannot hide the other regions' best places); the result then says each
         leaf's region.
         """
+        if batch < 1 or hot_batches < 1:
+            raise ValueError(f'CorrelativeGrid.search: batch and hot_batches must be >= 1, got '
+                             f'{batch}, {hot_batches}')
         t0 = time.perf_counter()
         pts = np.asarray(points, float).reshape(-1, 2)
         pts = pts[np.all(np.isfinite(pts), axis=1)]
@@ -256,9 +261,9 @@ class CorrelativeGrid:
                 if not len(k):
                     break
                 cold, cut = [], -math.inf
-                if len(k) > _HOT_BATCHES * batch:
-                    cut = float(np.partition(ub, len(ub) - _HOT_BATCHES * batch)
-                                [len(ub) - _HOT_BATCHES * batch])
+                if len(k) > hot_batches * batch:
+                    cut = float(np.partition(ub, len(ub) - hot_batches * batch)
+                                [len(ub) - hot_batches * batch])
                     up = ub >= cut
                     cold = [(k[~up], r[~up], c[~up], lev[~up], ub[~up])]
                     k, r, c, lev, ub = k[up], r[up], c[up], lev[up], ub[up]

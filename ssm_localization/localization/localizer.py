@@ -52,8 +52,8 @@ from .evidence import (beam_fractions, covariance_stds, endpoint_evidence, Evide
 from .fusion import lever_arm_covariance
 from .map_layers import build_map_layers
 from .refine import refine_poses
-from .regions import (is_new_yaw, pick_leaves, REGION_RATIO, SearchPlan, spread_yaws,
-                      with_region_bests)
+from .regions import (is_new_yaw, pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO,
+                      SearchPlan, spread_yaws, with_region_bests)
 from .verify import BeamCheck, check_beams
 from .voting import alignment_yaws, Votes
 from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
@@ -508,10 +508,11 @@ class GlobalLocalizer:
         if len(yaws) == 0:
             return []
         pts = _evenly(query.features.points, cfg.search_points)
+        regional = {} if plan is None else {
+            'regions': plan.regions, 'region_ratio': REGION_RATIO, 'batch': REGION_BATCH,
+            'hot_batches': REGION_HOT_BATCHES}
         found = self.grid.search(pts, yaws=yaws, window=window, min_score=cfg.search_min_score,
-                                 ratio=cfg.search_ratio, budget_s=cfg.search_budget,
-                                 regions=plan.regions if plan is not None else None,
-                                 region_ratio=REGION_RATIO if plan is not None else None)
+                                 ratio=cfg.search_ratio, budget_s=cfg.search_budget, **regional)
         return [Hypothesis(source='search', initial_pose=tuple(float(v) for v in found.poses[i]),
                            correlative=float(found.scores[i]))
                 for i in pick_leaves(found, cfg.search_keep, lambda a, b: not distinct(

@@ -225,8 +225,8 @@ def test_points_off_the_map_score_nothing(grid):
                                 pose[None])[0] == pytest.approx(score)
 
 
-def test_region_ratio_keeps_each_regions_best_place():
-    """A wall-dense region scoring every scan well does not hide another region's best place."""
+def _two_regions():
+    """Return a grid of a wall-dense region beside the rooms, its region labels and a truth."""
     d = np.zeros((64, 160), np.int8)
     d[::4, :64] = 100                                 # left: walls every 0.4 m
     d[:, ::4][:, :16] = 100
@@ -235,10 +235,16 @@ def test_region_ratio_keeps_each_regions_best_place():
     occ = OccupancyMap(d, RES, (0.0, 0.0, 0.0))
     grid = CorrelativeGrid(occ, depth=3, sigma=0.1, max_range=10.0)
     truth = _cell_centre_pose(occ, 12 + 12, 96 + 20, 0.4)
-    pts = _scan_from(occ, truth)
     labels = np.where(np.arange(grid.free_windows().shape[1]) < 64 // 8, 0, 1)[None, :] \
         * np.ones((grid.free_windows().shape[0], 1), int)
     labels = np.where(grid.free_windows(), labels, -1)
+    return occ, grid, labels, truth
+
+
+def test_region_ratio_keeps_each_regions_best_place():
+    """A wall-dense region scoring every scan well does not hide another region's best place."""
+    occ, grid, labels, truth = _two_regions()
+    pts = _scan_from(occ, truth)
     allowed = np.ones((1, 2), bool)
     found = grid.search(pts, yaws=[0.4], min_score=0.1, ratio=0.95,
                         regions=(labels, allowed), region_ratio=0.3)
@@ -248,6 +254,25 @@ def test_region_ratio_keeps_each_regions_best_place():
     # without regions the result is the plain search's, and says no regions
     plain = grid.search(pts, yaws=[0.4], min_score=0.1, ratio=0.95)
     assert plain.regions is None
+
+
+def test_how_many_windows_a_step_expands_changes_no_leaf():
+    """Any batch and any number of hot batches: the same leaves of a regional search."""
+    occ, grid, labels, truth = _two_regions()
+    pts = _scan_from(occ, truth)
+    yaws = 0.4 + np.radians([-1.0, 0.0, 1.0, 90.0])
+    kw = {'yaws': yaws, 'min_score': 0.1, 'ratio': 0.9, 'max_leaves': 10 ** 6,
+          'regions': (labels, np.ones((4, 2), bool)), 'region_ratio': 0.3}
+    first = grid.search(pts, **kw)
+    assert len(first.scores) > 10 and set(first.regions.tolist()) == {0, 1}
+    for batch, hot in ((3, 1), (5, 2), (64, 1), (16384, 1), (7, 9)):
+        found = grid.search(pts, batch=batch, hot_batches=hot, **kw)
+        assert np.array_equal(found.poses, first.poses), (batch, hot)
+        assert np.array_equal(found.scores, first.scores)
+        assert np.array_equal(found.regions, first.regions)
+    for batch, hot in ((0, 1), (16, 0)):
+        with pytest.raises(ValueError, match='batch and hot_batches'):
+            grid.search(pts, batch=batch, hot_batches=hot, **kw)
 
 
 def test_large_maps_are_searched_on_coarser_cells():

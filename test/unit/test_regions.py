@@ -10,7 +10,8 @@ from ssm_localization import build_index, GlobalLocalizer, OccupancyMap, read_ba
 from ssm_localization.bench.peer import FullSearchLocalizer
 from ssm_localization.localization.correlative import CorrelativeResult
 from ssm_localization.localization.localizer import _by_correlation
-from ssm_localization.localization.regions import pick_leaves, with_region_bests
+from ssm_localization.localization.regions import (
+    pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, with_region_bests)
 from ssm_localization.mapping.raycast import beam_angles, cast_rays
 from ssm_localization.transforms import apply, wrap_angle
 
@@ -130,6 +131,29 @@ def test_the_full_search_peer_searches_every_yaw_in_every_region(campus):
     found = full.localize_scan(*args)
     assert found.status == 'ok', found.message
     assert math.hypot(found.pose[0] - truth[0], found.pose[1] - truth[1]) < 0.05
+
+
+def test_a_regional_search_expands_its_windows_in_larger_steps(campus, monkeypatch):
+    """Steps of ``REGION_BATCH`` windows on a map of regions: the leaves of the smaller steps."""
+    occ, loc = campus
+    angles, ranges = _turned_scan(occ)
+    query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
+    search, calls = loc.grid.search, []
+
+    def spy(points, **kw):
+        calls.append((points, kw))
+        return search(points, **kw)
+
+    monkeypatch.setattr(loc.grid, 'search', spy)
+    assert loc.search_hypotheses(query, loc.search_plan(query, []))
+    (points, kw), = calls
+    assert (kw['batch'], kw['hot_batches'], kw['region_ratio']) == (
+        REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO)
+    assert REGION_BATCH > 2048
+    found = search(points, **kw)
+    small = search(points, **dict(kw, batch=2048, hot_batches=4, budget_s=None))
+    assert found.complete and small.complete
+    assert np.array_equal(found.poses, small.poses) and np.array_equal(found.scores, small.scores)
 
 
 def test_one_building_is_one_region_searched_as_before():
