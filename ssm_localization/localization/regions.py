@@ -46,8 +46,8 @@ REGION_RATIO = 0.85
 #: rest of the pool is looked at again (``CorrelativeGrid.search``'s ``batch`` and
 #: ``hot_batches``; 2048 and 4 on a map of one region). The per-region floors keep most
 #: windows of a wall-dense region above the bound whatever order they are expanded in, so
-#: fewer, larger steps cost less: the same leaves, the 90 captured campus searches in 0.80 of
-#: the time and at 0.6 of their p95 (docs/EXPERIMENTS.md)
+#: fewer, larger steps cost less: the same leaves, the 90 captured campus searches in
+#: 0.80-0.84 of the time and at 0.6 of their p95 (docs/EXPERIMENTS.md)
 REGION_BATCH = 16384
 REGION_HOT_BATCHES = 1
 #: after a regional search, leaves this far (metres) from every leaf taken are other places:
