@@ -116,10 +116,9 @@ class FullSearchLocalizer(GlobalLocalizer):
     search covers a full turn every ``angular_step`` in every region, its time budget is
     ``budget_s`` (a bound for a runaway search, not a limit any search here reaches), and there
     is no second look (``search_more_alignments`` 0: a search at further yaws would find
-    nothing new). Everything else is
-    the package's: the pose votes' hypotheses, which leaves go on (``search_keep``,
-    ``search_rivals``), the refinement, the ray casting and the verdict with its calibrated
-    confidence.
+    nothing new). Everything else is the package's: the pose votes' hypotheses, which leaves go
+    on (``search_keep``, ``search_rivals``), the refinement, the ray casting and the verdict with
+    its calibrated confidence.
     """
 
     def __init__(self, ours: GlobalLocalizer, angular_step: float = math.radians(1.0),
