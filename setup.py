@@ -18,7 +18,8 @@ setup(
         ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
         ('share/' + PACKAGE + '/rviz', glob('rviz/*.rviz')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'pyyaml', 'pillow', 'tqdm', 'rosbags'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'pyyaml', 'pillow', 'tqdm',
+                      'rosbags'],
     # mcap: salvaging the readable part of a damaged bag (no rosdep key exists for it)
     extras_require={'plot': ['matplotlib'], 'salvage': ['mcap'], 'test': ['pytest']},
     zip_safe=True,

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 from ssm_localization.config.localization import LocalizerConfig
-from ssm_localization.localization import correlative
+from ssm_localization.localization import correlative, kernels
 from ssm_localization.localization.correlative import CorrelativeGrid, likelihood_grid
 from ssm_localization.localization.map_layers import search_coarsening
 from ssm_localization.mapping.map_io import OccupancyMap
@@ -99,22 +99,49 @@ def test_the_leaves_do_not_depend_on_the_depth(grid, depth):
     assert np.array_equal(found.poses, ref.poses) and np.array_equal(found.scores, ref.scores)
 
 
+@pytest.mark.parametrize('compiled', [True, False], ids=['compiled', 'numpy'])
 @pytest.mark.parametrize('name, value', [
+    (None, None),               # the compiled loop against numpy's passes
     ('_SCORE_CHUNK', 7),        # windows scored a chunk at a time: chunk edges change nothing
     ('_FLOAT32_EXACT', 0),      # sums as integers, not as float32 products with ones
-], ids=['chunks', 'integer_sums'])
-def test_how_windows_are_scored_changes_no_score(grid, monkeypatch, name, value):
-    """Chunk size and the float32 product (exact below 2^24) leave every leaf as it was."""
+], ids=['as_is', 'chunks', 'integer_sums'])
+def test_how_windows_are_scored_changes_no_score(grid, monkeypatch, compiled, name, value):
+    """
+    Compiled or numpy, chunk size, the float32 product (exact below 2^24): the same leaves.
+
+    The reference is numpy's way with its defaults; each variant scores every window again.
+    """
     occ_map = _rooms()
     yaw0 = occ_map.origin[2] + 0.1
     pts = _scan_from(occ_map, _cell_centre_pose(occ_map, 15, 45, yaw0))
     yaws = yaw0 + np.radians([-1.0, 0.0, 1.0])
-    whole = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
-    monkeypatch.setattr(correlative, name, value)
+    with monkeypatch.context() as numpy_only:
+        numpy_only.setattr(kernels, 'window_sums', None)
+        whole = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    if not compiled:
+        monkeypatch.setattr(kernels, 'window_sums', None)
+    if name is not None:
+        monkeypatch.setattr(correlative, name, value)
     other = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
     assert len(whole.scores) > 10
     assert np.array_equal(other.poses, whole.poses)
     assert np.array_equal(other.scores, whole.scores)
+
+
+def test_the_compiled_window_sums_equal_the_python_loop():
+    """The loop numba compiles gives the sums of its Python source, clipping included."""
+    assert kernels.window_sums is not None, 'numba is a requirement (requirements.txt)'
+    rng = np.random.default_rng(5)
+    grid = rng.integers(0, 256, 500).astype(np.uint8)
+    base = rng.integers(-80, 80, (4, 37)).astype(np.int64)
+    yaw = rng.integers(0, 4, 300).astype(np.int64)
+    cell = rng.integers(-40, 540, 300).astype(np.int64)   # some indices fall off both ends
+    got, want = np.empty(300, np.int32), np.empty(300, np.int32)
+    kernels.window_sums(grid, base, yaw, cell, got)
+    kernels.window_sums_python(grid, base, yaw, cell, want)
+    clipped = np.take(grid, base[yaw] + cell[:, None], mode='clip').sum(axis=1)
+    assert np.array_equal(got, want) and np.array_equal(want, clipped)
+    assert ((base[yaw] + cell[:, None] < 0).any() and (base[yaw] + cell[:, None] >= 500).any())
 
 
 def test_allowed_windows_pair_each_yaw_with_the_windows_of_its_regions():

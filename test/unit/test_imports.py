@@ -1,9 +1,10 @@
 """
 What importing the package loads and changes.
 
-The localization core runs with numpy and scipy alone, ``import ssm_localization`` loads nothing
-heavy and leaves the environment alone, the console scripts set one BLAS thread before numpy
-loads, and every public name still resolves. Each check runs in a fresh interpreter.
+The localization core runs with numpy and scipy alone (numba, when installed, compiles one
+loop), ``import ssm_localization`` loads nothing heavy and leaves the environment alone, the
+console scripts set one BLAS thread before numpy loads, and every public name still resolves.
+Each check runs in a fresh interpreter.
 """
 from __future__ import annotations
 
@@ -19,14 +20,18 @@ from ssm_localization.threads import THREAD_VARIABLES
 #: what the localization core must not need
 NOT_NEEDED = ('rclpy', 'tqdm', 'yaml', 'rosbags', 'matplotlib', 'PIL', 'mcap')
 
-BLOCK = f"""
+
+def _block(names: tuple[str, ...]) -> str:
+    """Return code that makes ``names`` (top-level modules) unimportable."""
+    return f"""
 import sys
 class Blocker:
     def find_spec(self, name, path=None, target=None):
-        if name.split('.')[0] in {NOT_NEEDED!r}:
+        if name.split('.')[0] in {names!r}:
             raise ImportError('blocked for the test: ' + name)
 sys.meta_path.insert(0, Blocker())
 """
+
 
 LOCALIZE = """
 import math
@@ -64,14 +69,21 @@ def _python(code: str, *args: str, env: dict | None = None) -> subprocess.Comple
                           timeout=300, env=env)
 
 
-def test_the_localization_core_runs_with_numpy_and_scipy_alone(tmp_path):
-    """Index, save, load, localize and track with rclpy, tqdm, PyYAML, ... unimportable."""
-    res = _python(BLOCK + 'import json\n' + LOCALIZE, str(tmp_path / 'index.npz'))
+@pytest.mark.parametrize('numba', [True, False], ids=['with_numba', 'numpy_alone'])
+def test_the_localization_core_runs_with_numpy_and_scipy_alone(tmp_path, numba):
+    """
+    Index, save, load, localize and track with rclpy, tqdm, PyYAML, ... unimportable.
+
+    numba (a requirement) compiles the search's loop; without it the search runs in numpy.
+    """
+    blocked = NOT_NEEDED if numba else NOT_NEEDED + ('numba',)
+    res = _python(_block(blocked) + 'import json\n' + LOCALIZE, str(tmp_path / 'index.npz'))
     assert res.returncode == 0, res.stderr
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out['status'] == 'ok' and out['track'] == 'ok', out
     assert math_close(out['pose'], (2.7, 4.1, 0.6))
-    assert not set(NOT_NEEDED) & set(out['loaded'])
+    assert not set(blocked) & set(out['loaded'])
+    assert ('numba' in out['loaded']) == numba
 
 
 def math_close(pose, truth, tol: float = 0.05) -> bool:
@@ -80,8 +92,8 @@ def math_close(pose, truth, tol: float = 0.05) -> bool:
 
 def test_the_block_itself_works():
     """The blocked imports really fail (else the test above could not fail)."""
-    for name in NOT_NEEDED:
-        res = _python(BLOCK + f'import {name}\n')
+    for name in NOT_NEEDED + ('numba',):
+        res = _python(_block(NOT_NEEDED + ('numba',)) + f'import {name}\n')
         assert res.returncode != 0 and 'blocked for the test' in res.stderr, name
 
 
