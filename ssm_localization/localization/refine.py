@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from . import kernels
 from ..mapping.distance import feature_transform, squared_distances
 from ..transforms import Pose2, rotation, wrap_angle
 
@@ -298,7 +299,7 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
     and kept within the occupied cell; otherwise it stays 0. ``explained`` in each result is
     ``mean exp(-r^2 / 2 score_sigma^2)`` over all points at the final pose.
     """
-    pts = np.asarray(points, float).reshape(-1, 2)
+    pts = np.ascontiguousarray(np.asarray(points, float).reshape(-1, 2))
     x = np.array(poses, float).reshape(-1, 3)
     n_h, n_p = len(x), len(pts)
     dim = 4 if estimate_depth else 3
@@ -315,30 +316,17 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
             break
         trunc = truncate[0] + (truncate[1] - truncate[0]) * min(
             1.0, (it - 1) / max(iterations // 2, 1))
-        world, rel = _transform(x, pts)
-        r, g, valid = surface.signed_distance(world.reshape(-1, 2))
-        r = r.reshape(n_h, n_p) + delta[:, None]
-        g, valid = g.reshape(n_h, n_p, 2), valid.reshape(n_h, n_p)
-        use = valid & (np.abs(r) < trunc)
-        absr = np.abs(r)
-        wts = np.where(use, np.where(absr <= huber, 1.0, huber / np.maximum(absr, 1e-12)), 0.0)
-        cols = [g, (g[..., 1] * rel[..., 0] - g[..., 0] * rel[..., 1])[..., None]]
-        if estimate_depth:
-            cols.append(np.ones((n_h, n_p, 1)))
-        jac = np.concatenate(cols, axis=2)
-        a = np.einsum('hn,hni,hnj->hij', wts, jac, jac)
-        b = np.einsum('hn,hni,hn->hi', wts, jac, r)
+        a, b, sse, used = _normal_equations(surface, pts, x, delta, active, dim, trunc, huber)
         if estimate_depth:      # prior on delta, in units of the current residual variance
             a[:, 3, 3] += prior * sigma2
             b[:, 3] += prior * sigma2 * delta
-        enough = use.sum(axis=1) >= 3
+        enough = used >= 3
         step = np.zeros((n_h, dim))
         ok = active & enough
         if ok.any():
             step[ok] = -np.linalg.solve(a[ok] + 1e-9 * np.eye(dim), b[ok][..., None])[..., 0]
             jtj[ok] = a[ok]
-            sigma2[ok] = np.maximum(np.sum(wts[ok] * r[ok] ** 2, axis=1)
-                                    / np.maximum(use[ok].sum(axis=1) - dim, 1), min_sigma ** 2)
+            sigma2[ok] = np.maximum(sse[ok] / np.maximum(used[ok] - dim, 1), min_sigma ** 2)
         x += step[:, :3]
         x[:, 2] = wrap_angle(x[:, 2])
         if estimate_depth:
@@ -358,6 +346,45 @@ def refine_poses(surface: SurfaceModel, points: np.ndarray, poses: np.ndarray, *
             iterations=int(done_iters[k]), depth=float(surface.depth + delta[k]),
             explained=float(explained[k])))
     return out
+
+
+def _normal_equations(surface: SurfaceModel, pts: np.ndarray, x: np.ndarray, delta: np.ndarray,
+                      active: np.ndarray, dim: int, trunc: float, huber: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return ``(a, b, sse, used)``: ``J^T W J``, ``J^T W r``, ``sum w r^2`` and the residuals used.
+
+    Per pose (H, dim, dim), (H, dim), (H,), (H,) of one Gauss-Newton step: the residuals are the
+    points' signed distances (plus ``delta``) within ``trunc``, Huber-weighted beyond ``huber``.
+    Compiled in one pass when numba is there (``kernels.normal_equations``, the active poses
+    only), else in numpy.
+    """
+    n_h, n_p = len(x), len(pts)
+    if kernels.normal_equations is not None:
+        a, b = np.zeros((n_h, dim, dim)), np.zeros((n_h, dim))
+        sse, used = np.zeros(n_h), np.zeros(n_h, np.int64)
+        ox, oy, oyaw = surface.origin
+        frame = np.array([ox, oy, np.cos(oyaw), np.sin(oyaw),
+                          SUBDIVISION / surface.resolution, float(SUBDIVISION)])
+        kernels.normal_equations(x, delta, pts, active, surface.tiles, surface.codes,
+                                 surface.values, surface.cap, TILE, frame, surface.shape[0],
+                                 surface.shape[1], surface.resolution, surface.depth,
+                                 float(trunc), float(huber), a, b, sse, used)
+        return a, b, sse, used
+    world, rel = _transform(x, pts)
+    r, g, valid = surface.signed_distance(world.reshape(-1, 2))
+    r = r.reshape(n_h, n_p) + delta[:, None]
+    g, valid = g.reshape(n_h, n_p, 2), valid.reshape(n_h, n_p)
+    use = valid & (np.abs(r) < trunc)
+    absr = np.abs(r)
+    wts = np.where(use, np.where(absr <= huber, 1.0, huber / np.maximum(absr, 1e-12)), 0.0)
+    cols = [g, (g[..., 1] * rel[..., 0] - g[..., 0] * rel[..., 1])[..., None]]
+    if dim == 4:
+        cols.append(np.ones((n_h, n_p, 1)))
+    jac = np.concatenate(cols, axis=2)
+    a = np.einsum('hn,hni,hnj->hij', wts, jac, jac)
+    b = np.einsum('hn,hni,hn->hi', wts, jac, r)
+    return a, b, np.sum(wts * r ** 2, axis=1), use.sum(axis=1)
 
 
 def _transform(poses: np.ndarray, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

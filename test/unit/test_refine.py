@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 from ssm_localization import simulate, SimulationConfig
+from ssm_localization.localization import kernels
 from ssm_localization.localization.refine import refine_pose, refine_poses, SurfaceModel
 from ssm_localization.localization.verify import BeamCheck, check_beams
 from ssm_localization.transforms import apply, rotation, wrap_angle
@@ -247,6 +248,55 @@ def test_batched_refinement_equals_single(depot_clean):
         assert got.pose == pytest.approx(one.pose, abs=1e-9)
         assert got.explained == pytest.approx(one.explained, rel=1e-9, abs=1e-12)
         assert np.allclose(got.covariance, one.covariance, rtol=1e-6, atol=1e-15)
+
+
+@pytest.mark.parametrize('estimate_depth', [False, True], ids=['three_unknowns', 'with_depth'])
+@pytest.mark.parametrize('origin_yaw', [0.0, 0.4], ids=['map_aligned', 'map_rotated'])
+def test_compiled_refinement_is_numpy_s(depot_clean, monkeypatch, estimate_depth, origin_yaw):
+    """
+    The step's sums compiled (``kernels.normal_equations``) or in numpy: the same refinement.
+
+    Hypotheses near and far from the truth, one partly off the map; the sums differ only in the
+    order of their terms (float64 rounding), so the poses agree to 1e-12.
+    """
+    occ_map, sim, _ = depot_clean
+    ox, oy, _ = occ_map.origin
+    model = SurfaceModel.from_occupancy(occ_map.occupied_mask(), occ_map.resolution,
+                                        (ox, oy, origin_yaw), 0.5)
+    pts = _laser_points(sim.scans[4])
+    truth = sim.sensor_poses[4] if origin_yaw == 0.0 else np.array([2.0, 3.0, 0.4])
+    starts = np.array([truth + (0.02, -0.01, 0.01), truth + (-0.3, 0.2, -0.1),
+                       truth + (1.0, 0.5, 0.3), (ox - 1.0, oy - 1.0, 0.0)])
+    assert kernels.normal_equations is not None, 'numba is a requirement (requirements.txt)'
+    compiled = refine_poses(model, pts, starts, estimate_depth=estimate_depth)
+    monkeypatch.setattr(kernels, 'normal_equations', None)
+    numpy_way = refine_poses(model, pts, starts, estimate_depth=estimate_depth)
+    assert sum(r.iterations for r in compiled) > 8
+    for got, want in zip(compiled, numpy_way):
+        assert got.pose == pytest.approx(want.pose, abs=1e-12)
+        assert got.iterations == want.iterations
+        assert got.depth == pytest.approx(want.depth, abs=1e-12)
+        assert got.explained == pytest.approx(want.explained, abs=1e-12)
+        assert np.allclose(got.covariance, want.covariance, rtol=1e-9, atol=1e-18)
+
+
+def test_the_compiled_normal_equations_equal_the_python_loop(depot_clean):
+    """The loop numba compiles gives the sums of its Python source."""
+    _, sim, model = depot_clean
+    pts = _laser_points(sim.scans[0])[::7]
+    x = np.array([sim.sensor_poses[0] + (0.05, 0.02, 0.03), sim.sensor_poses[0]])
+    delta, active = np.array([0.01, -0.02]), np.array([True, True])
+    frame = np.array([*model.origin[:2], np.cos(model.origin[2]), np.sin(model.origin[2]),
+                      2 / model.resolution, 2.0])
+    sums = []
+    for loop in (kernels.normal_equations, kernels.normal_equations_python):
+        out = (np.zeros((2, 4, 4)), np.zeros((2, 4)), np.zeros(2), np.zeros(2, np.int64))
+        loop(x, delta, pts, active, model.tiles, model.codes, model.values, model.cap, 32, frame,
+             model.shape[0], model.shape[1], model.resolution, model.depth, 0.3, 0.1, *out)
+        sums.append(out)
+    assert (sums[0][3] > 10).all()
+    for got, want in zip(*sums):
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-15)
 
 
 def _dense_lattice(occ: np.ndarray) -> np.ndarray:
