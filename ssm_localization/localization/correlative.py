@@ -124,7 +124,7 @@ class CorrelativeGrid:
         self._free = [free]
         for k in range(1, self.depth + 1):
             self._free.append(_block_reduce(self._free[-1], 2, np.any))
-        kernels.warm_up()       # compiled (or loaded) here, not in the first search
+        kernels.warm_up()       # compiled (or loaded from the cache) before the first search
 
     # ------------------------------------------------------------------ geometry
     def _grid_yaws(self, yaws) -> np.ndarray:

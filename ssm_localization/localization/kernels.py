@@ -26,7 +26,7 @@ import numpy as np
 
 try:
     import numba
-except ImportError:                     # the numpy path of correlative._score is used instead
+except ImportError:                     # the callers' numpy code runs instead
     numba = None
 
 
@@ -107,6 +107,8 @@ def normal_equations_python(x: np.ndarray, delta: np.ndarray, pts: np.ndarray,
             dx, dy = rx + x[h, 0] - x0, ry + x[h, 1] - y0
             gx = (dx * co + dy * si) * scale
             gy = (dy * co - dx * si) * scale
+            if not (abs(gx) < 1e15 and abs(gy) < 1e15):     # NaN, inf: off the lattice
+                continue
             j = int(np.floor(gx))
             i = int(np.floor(gy))
             if j < 0 or j >= shape_w - 1 or i < 0 or i >= shape_h - 1:

@@ -281,22 +281,25 @@ def test_compiled_refinement_is_numpy_s(depot_clean, monkeypatch, estimate_depth
 
 
 def test_the_compiled_normal_equations_equal_the_python_loop(depot_clean):
-    """The loop numba compiles gives the sums of its Python source."""
+    """The loop numba compiles gives the sums of its Python source; NaN and inf points none."""
     _, sim, model = depot_clean
     pts = _laser_points(sim.scans[0])[::7]
     x = np.array([sim.sensor_poses[0] + (0.05, 0.02, 0.03), sim.sensor_poses[0]])
     delta, active = np.array([0.01, -0.02]), np.array([True, True])
     frame = np.array([*model.origin[:2], np.cos(model.origin[2]), np.sin(model.origin[2]),
                       2 / model.resolution, 2.0])
+    bad = np.vstack((pts, [[np.nan, 0.0], [np.inf, 1.0], [1e300, -1e300]]))
     sums = []
-    for loop in (kernels.normal_equations, kernels.normal_equations_python):
+    for loop, points in ((kernels.normal_equations, pts), (kernels.normal_equations_python, pts),
+                         (kernels.normal_equations, bad)):
         out = (np.zeros((2, 4, 4)), np.zeros((2, 4)), np.zeros(2), np.zeros(2, np.int64))
-        loop(x, delta, pts, active, model.tiles, model.codes, model.values, model.cap, 32, frame,
-             model.shape[0], model.shape[1], model.resolution, model.depth, 0.3, 0.1, *out)
+        loop(x, delta, points, active, model.tiles, model.codes, model.values, model.cap, 32,
+             frame, model.shape[0], model.shape[1], model.resolution, model.depth, 0.3, 0.1, *out)
         sums.append(out)
     assert (sums[0][3] > 10).all()
-    for got, want in zip(*sums):
+    for got, want, with_bad in zip(*sums):
         assert np.allclose(got, want, rtol=1e-12, atol=1e-15)
+        assert np.array_equal(with_bad, got)
 
 
 def _dense_lattice(occ: np.ndarray) -> np.ndarray:
