@@ -84,6 +84,7 @@ def test_the_localization_core_runs_with_numpy_and_scipy_alone(tmp_path, numba):
     assert math_close(out['pose'], (2.7, 4.1, 0.6))
     assert not set(blocked) & set(out['loaded'])
     assert ('numba' in out['loaded']) == numba
+    assert ('numba is not installed' in res.stderr) == (not numba)
 
 
 def math_close(pose, truth, tol: float = 0.05) -> bool:
