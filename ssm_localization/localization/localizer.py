@@ -13,8 +13,10 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
    correspondences give a pose hypothesis;
 5. correlative search (beyond the paper, ``correlative.py``): branch and bound over the whole
    map at the yaws of the best hypotheses and their flips, which finds the places the voting
-   missed (typically a corridor whose position along it only far walls tell); an answer that
-   is not ``ok`` in the end gets a second look, the search at further yaws (``second_look``);
+   missed (typically a corridor whose position along it only far walls tell); on a map of
+   several regions each region at its own yaws, also those of the peaks too weak for step 4
+   (``regions.py``); an answer that is not ``ok`` in the end gets a second look, the search at
+   further yaws (``second_look``);
 6. refinement (``refine.py``): Gauss-Newton on the map's wall surface, the surface offset
    estimated from the scan, on the even points, and once more from the optimum of every
    endpoint (the few even points alone can settle half a degree off); the explained fraction
