@@ -164,9 +164,11 @@ def test_peaks_too_weak_for_a_hypothesis_are_handed_to_the_search(depot, localiz
                                                           fine_min_inliers=SEED_MIN_INLIERS))
     assert weak == [h.initial_pose for h in loose.spectral_hypotheses(query)]
     assert weak
-    none = []
-    assert localizer.spectral_hypotheses(query, weak=none) and all(
-        len(pose) == 3 for pose in none)
+    # the installed defaults: the hypotheses as without the list, every weak seed a pose
+    spare = []
+    assert [h.initial_pose for h in localizer.spectral_hypotheses(query, weak=spare)] == [
+        h.initial_pose for h in localizer.spectral_hypotheses(query)]
+    assert all(len(pose) == 3 for pose in spare)
 
 
 def test_search_at_the_true_yaw_finds_the_place(depot, localizer, query):
