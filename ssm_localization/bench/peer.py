@@ -17,7 +17,6 @@ what the restricted search loses in places found, the verdict being the same.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
 import dataclasses
 from dataclasses import dataclass
 import math
@@ -131,8 +130,7 @@ class FullSearchLocalizer(GlobalLocalizer):
         n = max(int(round(2.0 * math.pi / angular_step)), 1)
         self._full_turn = 2.0 * math.pi * np.arange(n) / n
 
-    def search_plan(self, query: Query, seeds: list[Pose2],
-                    weak_seeds: Sequence[Pose2] = ()) -> SearchPlan:
-        """Return every yaw of the full turn in every region (whatever the seeds)."""
+    def search_plan(self, query: Query, seeds: list[Pose2]) -> SearchPlan:
+        """Return every yaw of the full turn in every region."""
         allowed = np.ones((len(self._full_turn), self.regions.count), bool)
         return SearchPlan(self._full_turn, allowed, self.regions.labels)

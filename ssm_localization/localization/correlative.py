@@ -65,13 +65,6 @@ class CorrelativeResult:
     def best_score(self) -> float:
         return float(self.scores[0]) if len(self.scores) else 0.0
 
-    def ranked(self, scores: np.ndarray) -> 'CorrelativeResult':
-        """Return the same leaves with ``scores`` (L,), best first (ties keep their order)."""
-        scores = np.asarray(scores, float)
-        order = np.lexsort((np.arange(len(scores)), -scores))
-        return CorrelativeResult(self.poses[order], scores[order], self.complete,
-                                 None if self.regions is None else self.regions[order])
-
 
 class CorrelativeGrid:
     """

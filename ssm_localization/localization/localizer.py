@@ -13,10 +13,8 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
    correspondences give a pose hypothesis;
 5. correlative search (beyond the paper, ``correlative.py``): branch and bound over the whole
    map at the yaws of the best hypotheses and their flips, which finds the places the voting
-   missed (typically a corridor whose position along it only far walls tell); on a map of
-   several regions each region at its own yaws, also those of the peaks too weak for step 4
-   (``regions.py``); an answer that is not ``ok`` in the end gets a second look, the search at
-   further yaws (``second_look``);
+   missed (typically a corridor whose position along it only far walls tell); an answer that
+   is not ``ok`` in the end gets a second look, the search at further yaws (``second_look``);
 6. refinement (``refine.py``): Gauss-Newton on the map's wall surface, the surface offset
    estimated from the scan, on the even points, and once more from the optimum of every
    endpoint (the few even points alone can settle half a degree off); the explained fraction
@@ -37,7 +35,7 @@ vicinity score (eq. 10) wins, always ``ok``.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 import copy
 import dataclasses
 from dataclasses import dataclass, field, replace
@@ -55,7 +53,7 @@ from .fusion import lever_arm_covariance
 from .map_layers import build_map_layers
 from .refine import refine_poses
 from .regions import (is_new_yaw, pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO,
-                      SearchPlan, SEED_MIN_INLIERS, spread_yaws, with_region_bests)
+                      SearchPlan, spread_yaws, with_region_bests)
 from .verify import BeamCheck, check_beams
 from .voting import alignment_yaws, Votes
 from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
@@ -374,11 +372,10 @@ class GlobalLocalizer:
         clock.lap('prepare')
         if self.config.paper_mode:
             return self._paper(query, clock)
-        weak: list[Pose2] = []
-        hyps = self.correlate(query, self.spectral_hypotheses(query, clock, weak))
+        hyps = self.correlate(query, self.spectral_hypotheses(query, clock))
         seeds = [h.initial_pose for h in _by_correlation(hyps)]
         if self.config.search:
-            found = self.search_hypotheses(query, self.search_plan(query, seeds, weak))
+            found = self.search_hypotheses(query, self.search_plan(query, seeds))
             hyps += self.correlate(query, found)        # scored as the spectral ones are
             clock.lap('search')
         verified, others = [], []
@@ -443,15 +440,9 @@ class GlobalLocalizer:
         return self.decide(query, verified, clock, others=more + others)
 
     # -- stages -----------------------------------------------------------------------------
-    def spectral_hypotheses(self, query: Query, clock: StageClock | None = None,
-                            weak: list[Pose2] | None = None) -> list[Hypothesis]:
-        """
-        Pose voting, spectral coarse ranking of the peaks (eq. 5), RANSAC fine pose.
-
-        A peak whose RANSAC pose has fewer than ``fine_min_inliers`` inliers is no hypothesis;
-        with at least ``regions.SEED_MIN_INLIERS`` its pose is appended to ``weak`` (if given):
-        the seeds a search of several regions also takes.
-        """
+    def spectral_hypotheses(self, query: Query,
+                            clock: StageClock | None = None) -> list[Hypothesis]:
+        """Pose voting, spectral coarse ranking of the peaks (eq. 5), RANSAC fine pose."""
         cfg = self.config
         feats = query.features
         votes = self.voting.vote(feats)
@@ -475,8 +466,6 @@ class GlobalLocalizer:
                                       mc.ransac_threshold, cfg.fine_ransac_iterations, rng,
                                       mc.ransac_min_span)
             if not found or found[0][1].sum() < cfg.fine_min_inliers:
-                if found and weak is not None and found[0][1].sum() >= SEED_MIN_INLIERS:
-                    weak.append(tuple(float(v) for v in found[0][0]))
                 continue
             pose, inliers = found[0]
             node = int(np.bincount(self.voting.nodes[mj[inliers]]).argmax())
@@ -524,24 +513,18 @@ class GlobalLocalizer:
             'hot_batches': REGION_HOT_BATCHES}
         found = self.grid.search(pts, yaws=yaws, window=window, min_score=cfg.search_min_score,
                                  ratio=cfg.search_ratio, budget_s=cfg.search_budget, **regional)
-        if plan is not None:
-            # which of the places that fit the search's few points go on: those that fit the
-            # whole scan (on a campus hundreds of corridor places fit 40 points alike)
-            found = found.ranked(self.grid.score_poses(query.features.points, found.poses))
         return [Hypothesis(source='search', initial_pose=tuple(float(v) for v in found.poses[i]),
                            correlative=float(found.scores[i]))
                 for i in pick_leaves(found, cfg.search_keep, lambda a, b: not distinct(
                     a, b, cfg.vote_bin_xy, cfg.search_step * 3), cfg.search_rivals)]
 
-    def search_plan(self, query: Query, seeds: list[Pose2],
-                    weak_seeds: Sequence[Pose2] = ()) -> SearchPlan:
+    def search_plan(self, query: Query, seeds: list[Pose2]) -> SearchPlan:
         """
         Return where to search at which yaws: :meth:`search_yaws`, region by region.
 
-        ``seeds``: laser poses of the best hypotheses, best first; ``weak_seeds``: those of the
-        vote peaks too weak to be hypotheses (``regions.py``).
+        ``seeds``: laser poses of the best hypotheses, best first (``regions.py``).
         """
-        return self.regions.plan(query.wall_angles, seeds, self.config, weak_seeds=weak_seeds)
+        return self.regions.plan(query.wall_angles, seeds, self.config)
 
     def search_yaws(self, query: Query, yaws) -> np.ndarray:
         """

@@ -50,12 +50,6 @@ REGION_RATIO = 0.85
 #: 0.80-0.84 of the time and at 0.6 of their p95 (docs/EXPERIMENTS.md)
 REGION_BATCH = 16384
 REGION_HOT_BATCHES = 1
-#: on a map of several regions a vote peak whose RANSAC pose has at least this many inliers,
-#: though fewer than ``fine_min_inliers``, still seeds the search's yaws in its own region: a
-#: query point's nearest descriptors spread over every building, so the truth's peak keeps
-#: fewer correspondences than on its building's own map (4-5 instead of 6-8 on the campus's
-#: Edmonton scans) while its pose stays within 0.12 m and 2 degrees (docs/EXPERIMENTS.md)
-SEED_MIN_INLIERS = 4
 #: after a regional search, leaves this far (metres) from every leaf taken are other places:
 #: up to ``search_keep`` of them are taken too, as the rivals a look-alike answer must beat
 PLACE_APART = 3.0
@@ -155,15 +149,12 @@ class SearchRegions:
         return out
 
     def plan(self, scan_angles: np.ndarray, seeds: list[Pose2],
-             cfg: LocalizerConfig, more: bool = False,
-             weak_seeds: Sequence[Pose2] = ()) -> SearchPlan:
+             cfg: LocalizerConfig, more: bool = False) -> SearchPlan:
         """
         Return the yaws to search in each region.
 
         Up to ``search_seeds`` seeds distinct modulo a half turn (the hypotheses' laser poses,
         best first) are searched in their own region (in every region when they lie in none);
-        with several regions also every yaw of ``weak_seeds`` (laser poses of vote peaks too
-        weak to be hypotheses, :data:`SEED_MIN_INLIERS`) in its own region, beyond that count;
         every region at its ``search_alignments`` yaws that align the scan's wall directions
         (``scan_angles``) with its own; each yaw with its flip, each +- ``search_spread`` in
         steps of ``search_step``. With one region: the yaws of ``GlobalLocalizer.search_yaws``,
@@ -179,12 +170,6 @@ class SearchRegions:
                 centres.append((yaw, region))
             if len(centres) >= cfg.search_seeds:
                 break
-        for pose in weak_seeds if self.count > 1 else ():
-            region = int(self.region_of(np.array([pose[:2]]))[0])
-            if region >= 0 and is_new_yaw(float(pose[2]), [c for c, g in centres
-                                                           if g in (region, -1)],
-                                          cfg.search_step):
-                centres.append((float(pose[2]), region))
         first = cfg.search_alignments
         aligned = self.alignment_yaws(scan_angles,
                                       first + (cfg.search_more_alignments if more else 0))

@@ -18,7 +18,6 @@ from ssm_localization.bench.peer import FullSearchLocalizer
 from ssm_localization.config.confidence import CONFIDENCE_MODEL
 from ssm_localization.localization.evidence import Evidence
 from ssm_localization.localization.localizer import Hypothesis, STATUSES, verdict, vicinity_score
-from ssm_localization.localization.regions import SEED_MIN_INLIERS
 from ssm_localization.localization.verify import BeamCheck
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
@@ -152,23 +151,6 @@ def test_a_peak_becomes_a_hypothesis_with_fine_min_inliers_ransac_inliers(depot,
     assert strict.spectral_hypotheses(query) == []
     loose = GlobalLocalizer(depot[1], dataclasses.replace(localizer.config, fine_min_inliers=2))
     assert len(loose.spectral_hypotheses(query)) >= few >= 1
-
-
-def test_peaks_too_weak_for_a_hypothesis_are_handed_to_the_search(depot, localizer, query):
-    """With ``SEED_MIN_INLIERS`` or more inliers a refused peak's pose is a weak seed."""
-    strict = GlobalLocalizer(depot[1], dataclasses.replace(localizer.config,
-                                                           fine_min_inliers=10 ** 6))
-    weak = []
-    assert strict.spectral_hypotheses(query, weak=weak) == []
-    loose = GlobalLocalizer(depot[1], dataclasses.replace(localizer.config,
-                                                          fine_min_inliers=SEED_MIN_INLIERS))
-    assert weak == [h.initial_pose for h in loose.spectral_hypotheses(query)]
-    assert weak
-    # the installed defaults: the hypotheses as without the list, every weak seed a pose
-    spare = []
-    assert [h.initial_pose for h in localizer.spectral_hypotheses(query, weak=spare)] == [
-        h.initial_pose for h in localizer.spectral_hypotheses(query)]
-    assert all(len(pose) == 3 for pose in spare)
 
 
 def test_search_at_the_true_yaw_finds_the_place(depot, localizer, query):

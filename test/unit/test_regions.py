@@ -11,8 +11,7 @@ from ssm_localization.bench.peer import FullSearchLocalizer
 from ssm_localization.localization.correlative import CorrelativeResult
 from ssm_localization.localization.localizer import _by_correlation
 from ssm_localization.localization.regions import (
-    pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, spread_yaws,
-    with_region_bests)
+    pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, with_region_bests)
 from ssm_localization.mapping.raycast import beam_angles, cast_rays
 from ssm_localization.transforms import apply, wrap_angle
 
@@ -200,64 +199,3 @@ def test_leaves_and_refinement_keep_each_regions_best():
                                                                                ranked[4]]
     Regions.count = 1
     assert with_region_bests(Regions, ranked, 2, lambda p: p) == ranked[:2]
-
-
-def test_weak_vote_peaks_seed_the_search_in_their_own_region(campus):
-    """A peak too weak for a hypothesis adds its yaw, in its region only, on maps of regions."""
-    occ, loc = campus
-    angles, ranges = _turned_scan(occ)
-    query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
-    cfg = loc.config
-    before = loc.search_plan(query, [])
-    mine = loc.regions.region_of(np.array([TURNED_TRUTH[:2]]))[0]
-    planned = before.yaws[before.allowed[:, mine]]
-    # a yaw far from every planned one: half way between two of them modulo a half turn
-    free = np.linspace(0.0, math.pi, 181)
-    gap = np.abs(wrap_angle(2.0 * (free[:, None] - planned[None, :]))).min(axis=1) / 2.0
-    yaw = float(free[np.argmax(gap)])
-    assert gap.max() > 3.0 * cfg.search_step
-    weak = [(TURNED_TRUTH[0], TURNED_TRUTH[1], yaw), (37.0, 12.0, yaw + 0.5)]   # 2nd: no region
-    after = loc.search_plan(query, [], weak)
-    new = np.abs(wrap_angle(after.yaws - yaw)) < 1e-9
-    assert new.sum() == 1 and after.allowed[new].sum() == 1 and after.allowed[new, mine].all()
-    assert not (np.abs(wrap_angle(after.yaws - yaw - 0.5)) < 1e-9).any()
-    assert len(after.yaws) == len(before.yaws) + len(spread_yaws([yaw], cfg))
-    # one region: weak peaks change nothing
-    bag = read_bag(BAGS / 'depot_sim')
-    one = GlobalLocalizer(build_index(bag.map))
-    scan = bag.scans[0]
-    q = one.prepare_scan(scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
-                         scan.range_max)
-    plain = one.search_plan(q, [])
-    assert np.array_equal(one.search_plan(q, [], [(1.0, 1.0, yaw)]).yaws, plain.yaws)
-
-
-def test_a_regional_search_ranks_its_places_by_the_whole_scan(campus, monkeypatch):
-    """Leaves go on in the order of every even point's likelihood, not of the search's 40."""
-    occ, loc = campus
-    angles, ranges = _turned_scan(occ)
-    query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
-    truth = loc.grid.search(query.features.points[:40], yaws=np.array([TURNED_TRUTH[2]]),
-                            min_score=0.0).poses[0]
-    # as the search might rank them: two places elsewhere above the truth's
-    poses = np.array([(10.0, 8.0, 0.3), (66.0, 12.0, 1.0), truth])
-    where = loc.regions.region_of(poses[:, :2])
-    monkeypatch.setattr(loc.grid, 'search', lambda points, **kw: CorrelativeResult(
-        poses, np.array([1.0, 0.99, 0.98]), True, regions=where))
-    hyps = loc.search_hypotheses(query, loc.search_plan(query, []))
-    full = loc.grid.score_poses(query.features.points, poses)
-    assert full[2] > max(full[:2])
-    assert np.allclose(hyps[0].initial_pose, truth) and len(hyps) == 3
-    scores = [h.correlative for h in hyps]
-    assert scores == sorted(scores, reverse=True) and np.allclose(sorted(full)[::-1], scores)
-
-
-def test_leaves_are_ranked_anew_with_their_regions():
-    found = CorrelativeResult(np.arange(12.0).reshape(4, 3), np.array([1.0, 0.9, 0.9, 0.8]),
-                              True, regions=np.array([0, 1, 2, 3]))
-    again = found.ranked(np.array([0.5, 0.7, 0.5, 0.9]))
-    assert again.regions.tolist() == [3, 1, 0, 2]          # ties keep their order
-    assert np.array_equal(again.poses, found.poses[[3, 1, 0, 2]])
-    assert again.scores.tolist() == [0.9, 0.7, 0.5, 0.5] and again.complete
-    assert CorrelativeResult(found.poses, found.scores, False).ranked(
-        found.scores).regions is None
