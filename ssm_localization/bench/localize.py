@@ -52,8 +52,8 @@ from .answers import AnswerLog, decided_by
 from .campus import campus_map, office_30m, site_queries, SiteQueries, write_query_bag
 from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer, FullSearchLocalizer
-from .places import (answers_on, foreign, load_place, real_grid, REAL_PLACES, SIM_PLACES,
-                     sim_queries)
+from .places import (answers_on, foreign, load_place, MAP_RESOLUTION, real_grid, REAL_PLACES,
+                     SIM_PLACES, sim_queries)
 from ..config.params import load_configs
 from ..evaluation.calibration import reliability_report
 from ..evaluation.plotting import plot_reliability, plot_replay
@@ -130,6 +130,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--reliability', metavar='PNG',
                         help='write the reliability diagram (reported confidence vs observed '
                              'precision, per split) of every answer of the run')
+    parser.add_argument('--map-resolution', type=float, default=MAP_RESOLUTION, metavar='M',
+                        help='cell size of the maps built from the real logs (the real sets, '
+                             'their clutter variants, the real places of --foreign), metres; '
+                             f'default {MAP_RESOLUTION:g}; the nav2 maps and the campus-scale '
+                             'sets keep their own')
     parser.add_argument('--answers', metavar='CSV',
                         help='write every answer of the run (own scans through every sensor, '
                              'foreign scans, campus): set, split, sensor, status, what decided '
@@ -281,12 +286,13 @@ def run(args: argparse.Namespace) -> int:
                     name, scans, [truth[s.stamp] for s in scans])])
                 print(f'  wrote {bag}', flush=True)
         elif name in REAL_SETS:
-            map_name, place = name, load_place(name, data, work, args.real_max)
+            map_name, place = name, load_place(name, data, work, args.real_max,
+                                               resolution=args.map_resolution)
             grid, scans = place.grid, place.scans
             truth = dict(zip((s.stamp for s in scans), place.truth))
         elif name in REAL_SIM_SETS:
             map_name, extra = REAL_SIM_SETS[name]
-            grid = real_grid(data, work, REAL_SETS[map_name])
+            grid = real_grid(data, work, REAL_SETS[map_name], resolution=args.map_resolution)
             scans, truth = sim_queries(grid, args.n, args.seed, extra)
         else:
             map_name, extra = SIM_SETS[name]
@@ -405,7 +411,8 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
     with this package's (:class:`FullSearchLocalizer`: what searching every yaw would cost).
     """
     names = args.foreign_places
-    places = {n: load_place(n, data, work, 0 if n in REAL_PLACES else args.foreign_n, seed=7)
+    places = {n: load_place(n, data, work, 0 if n in REAL_PLACES else args.foreign_n, seed=7,
+                            resolution=args.map_resolution)
               for n in names}
     print(f'foreign scans: {args.foreign_n} scans of each place on the map of each other '
           f'place (ok = a confident pose on a map the scan is not from)', flush=True)

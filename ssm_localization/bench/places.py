@@ -17,6 +17,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from ..config.mapping import MapBuildConfig
 from ..config.simulation import SimulationConfig
 from ..evaluation.replay import within_success
 from ..io.bag_records import ScanRecord
@@ -34,6 +35,9 @@ REAL_PLACES = {'intel': 'intel', 'aces': 'aces', 'fr079': 'freiburg-079', 'csail
 SIM_PLACES = ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room')
 #: maps of one and the same place (TurtleBot3's world and sandbox): never foreign to each other
 SAME_PLACE = (frozenset({'tb3_sandbox', 'turtlebot3_world'}),)
+#: cell size of the maps built from the logs unless a benchmark asks for another (metres): the
+#: map builder's default, the resolution every calibration map had
+MAP_RESOLUTION = MapBuildConfig().resolution
 
 
 def sim_queries(grid, n: int, seed: int, extra: dict):
@@ -55,24 +59,27 @@ def odd_scans(log: CarmenLog, count: int) -> tuple[list[ScanRecord], list[Pose2]
     return log_scan_records(log, odd), [tuple(float(v) for v in log.poses[k]) for k in odd]
 
 
-def real_map(data: Path, work: Path, name: str):
+def real_map(data: Path, work: Path, name: str, resolution: float = MAP_RESOLUTION):
     """
     Return the CARMEN log ``name`` and the map of its even-numbered scans.
 
-    The map is cached in ``work``.
+    The map is cached in ``work``; ``resolution`` is its cell size (metres).
     """
     log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
-    return log, real_grid(data, work, name, log)
+    return log, real_grid(data, work, name, log, resolution)
 
 
-def real_grid(data: Path, work: Path, name: str, log: CarmenLog | None = None):
+def real_grid(data: Path, work: Path, name: str, log: CarmenLog | None = None,
+              resolution: float = MAP_RESOLUTION):
     """Return the map of :func:`real_map`; the log is read only to build a map not cached yet."""
-    map_yaml = work / f'{name}_even.yaml'
+    map_yaml = work / (f'{name}_even.yaml' if resolution == MAP_RESOLUTION
+                       else f'{name}_even_{resolution * 1000:.0f}mm.yaml')
     if map_yaml.exists():
         return load_map_yaml(map_yaml)
     if log is None:
         log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
-    grid = build_map(log, indices=range(0, len(log), 2))
+    grid = build_map(log, indices=range(0, len(log), 2),
+                     config=MapBuildConfig(resolution=resolution))
     save_map_yaml(grid, map_yaml)       # creates work/
     return grid
 
@@ -111,15 +118,16 @@ def foreign(a: str, b: str) -> bool:
     return a != b and not any({a, b} <= s for s in SAME_PLACE)
 
 
-def load_place(name: str, data: Path, work: Path, count: int, seed: int = 1) -> Place:
+def load_place(name: str, data: Path, work: Path, count: int, seed: int = 1,
+               resolution: float = MAP_RESOLUTION) -> Place:
     """
     Return the place ``name`` with ``count`` queries.
 
-    Real: ``count`` odd-numbered scans evenly spread over the log (0: all); simulated: ``count``
-    random poses (seeded).
+    Real: ``count`` odd-numbered scans evenly spread over the log (0: all), the map built at
+    ``resolution``; simulated: ``count`` random poses (seeded) on the map as shipped.
     """
     if name in REAL_PLACES:
-        log, grid = real_map(data, work, REAL_PLACES[name])
+        log, grid = real_map(data, work, REAL_PLACES[name], resolution)
         return Place(name, grid, *odd_scans(log, count))
     if name in SIM_PLACES:
         grid = load_map_yaml(data / 'maps' / f'{name}.yaml')

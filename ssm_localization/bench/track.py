@@ -38,7 +38,7 @@ from tqdm import tqdm
 
 from .data import data_dir, DATA_HELP
 from .localize import REAL_SETS, split_of
-from .places import real_map
+from .places import MAP_RESOLUTION, real_map
 from ..config.params import load_all_configs
 from ..evaluation.calibration import reliability_report
 from ..evaluation.plotting import plot_reliability, plot_track
@@ -81,6 +81,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--seed', type=int, default=1, help='seed of the random kidnaps')
     parser.add_argument('--data', default=None, help=DATA_HELP)
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
+    parser.add_argument('--map-resolution', type=float, default=MAP_RESOLUTION, metavar='M',
+                        help='cell size of the maps built from the logs, metres (default '
+                             f'{MAP_RESOLUTION:g})')
     parser.add_argument('--params', help='params YAML applied to every set (index, localizer '
                                          'and tracker sections)')
     parser.add_argument('--plot-dir', help='write one figure per sequence here')
@@ -156,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
     graded: dict[str, list[tuple[float, bool]]] = {}
     for name in sets:
         t0 = time.perf_counter()
-        log, grid = real_map(data, work, REAL_SETS[name])
+        log, grid = real_map(data, work, REAL_SETS[name], args.map_resolution)
         localizer = GlobalLocalizer(build_index(grid, index_cfg), loc_cfg)
         odd = np.arange(1, len(log), 2)
         real = log_sequence(log, odd[:args.scans] if args.scans > 0 else odd, name=name)
