@@ -22,9 +22,6 @@ from pathlib import Path
 #: what "right" means wherever a confidence is fitted or measured: within this of the truth
 RIGHT_XY = 0.5                      # metres
 RIGHT_YAW = math.radians(5.0)       # radians
-#: cell size of every map the models were fitted on (metres): on a coarser map the evidence is
-#: measured with the coarser cells allowed for (``localization/resolution.py``)
-CALIBRATION_RESOLUTION = 0.05
 #: reasons the rules refuse an answer before the model is asked, with a neutral rate
 REFUSED_REASONS = {'implausible': 0.0, 'rival': 0.5, 'degenerate': 0.5}
 

@@ -54,7 +54,6 @@ from .map_layers import build_map_layers
 from .refine import refine_poses
 from .regions import (is_new_yaw, pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO,
                       SearchPlan, spread_yaws, with_region_bests)
-from .resolution import beam_tolerances, effective_score_sigma, excess_cell
 from .verify import BeamCheck, check_beams
 from .voting import alignment_yaws, Votes
 from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
@@ -285,10 +284,6 @@ class GlobalLocalizer:
         self.matcher_config = index.config.matcher
         if len(index.features) == 0:
             raise ValueError('the map index has no nodes: nothing to localize against')
-        #: the explained fraction's residual scale and how much coarser the map's cells are than
-        #: the calibration maps' (``resolution.py``: both as configured on such maps)
-        self.score_sigma = effective_score_sigma(cfg.score_sigma, index.map.resolution)
-        self._excess_cell = excess_cell(index.map.resolution)
         layers = build_map_layers(index, cfg, layer)
         self.grid, self.surface = layers.grid, layers.surface
         self.caster, self.voting = layers.caster, layers.voting
@@ -593,7 +588,7 @@ class GlobalLocalizer:
             return refine_poses(self.surface, points, np.asarray(starts),
                                 iterations=cfg.refine_iterations, truncate=truncate,
                                 estimate_depth=cfg.estimate_depth,
-                                depth_prior=cfg.surface_depth_std, score_sigma=self.score_sigma)
+                                depth_prior=cfg.surface_depth_std, score_sigma=cfg.score_sigma)
 
         starts = [h.initial_pose for h in todo]
         results = gauss_newton(query.features.points, starts)
@@ -670,42 +665,11 @@ class GlobalLocalizer:
 
     def _checks(self, laser_poses: list[Pose2], angles: np.ndarray, measured: np.ndarray,
                 range_max: float) -> list[BeamCheck]:
-        """
-        Ray-cast ``angles`` from each laser pose and compare with the ``measured`` ranges.
-
-        On a map of coarser cells than the calibration maps each beam's tolerance grows with the
-        extra cell size over the cosine of its incidence on the wall it meets
-        (``resolution.py``).
-        """
+        """Ray-cast ``angles`` from each laser pose and compare with the ``measured`` ranges."""
         cfg = self.config
-        poses = np.array(laser_poses, float).reshape(-1, 3)
-        expected = self.caster.cast(poses, angles, cfg.max_cast_range)
-        tols = [cfg.beam_tolerance] * len(poses)
-        if self._excess_cell > 0.0:
-            tols = [beam_tolerances(cfg.beam_tolerance, self._excess_cell,
-                                    self._incidence(p, angles, e))
-                    for p, e in zip(poses, expected)]
-        return [check_beams(measured, e, tol=t, range_limit=range_max)
-                for e, t in zip(expected, tols)]
-
-    def _incidence(self, laser_pose: np.ndarray, angles: np.ndarray,
-                   expected: np.ndarray) -> np.ndarray:
-        """
-        Return the cosine of each beam's angle with the normal of the wall the ray cast met.
-
-        The normal is the wall surface's gradient where the beam meets it; 1 for a beam that
-        meets no wall (or where the surface is not stored).
-        """
-        a = np.asarray(angles, float) + laser_pose[2]
-        u = np.column_stack((np.cos(a), np.sin(a)))
-        meets = np.isfinite(expected)
-        at = laser_pose[:2] + u * np.where(meets, expected, 0.0)[:, None]
-        _, grad, valid = self.surface.signed_distance(at)
-        norm = np.hypot(grad[:, 0], grad[:, 1])
-        good = meets & valid & (norm > 0.0)
-        cos = np.ones(len(a))
-        cos[good] = np.abs((u[good] * grad[good]).sum(axis=1)) / norm[good]
-        return cos
+        expected = self.caster.cast(np.array(laser_poses), angles, cfg.max_cast_range)
+        return [check_beams(measured, e, tol=cfg.beam_tolerance, range_limit=range_max)
+                for e in expected]
 
     def polish(self, query: Query, h: Hypothesis) -> Hypothesis:
         """Return ``h`` after a last Gauss-Newton run on every endpoint of the scan."""
@@ -716,7 +680,7 @@ class GlobalLocalizer:
                          iterations=cfg.polish_iterations,
                          truncate=(cfg.refine_radius[1], cfg.refine_radius[1]),
                          estimate_depth=cfg.estimate_depth, depth_prior=cfg.surface_depth_std,
-                         score_sigma=self.score_sigma)[0]
+                         score_sigma=cfg.score_sigma)[0]
         return replace(h, laser_pose=r.pose, depth=r.depth, pose=self.base_pose(r.pose),
                        covariance=self.report_covariance(r.covariance, r.pose))
 
@@ -730,7 +694,7 @@ class GlobalLocalizer:
         laser = self.laser_pose(pose)
         explained = self.surface.explained(apply(laser, query.features.points),
                                            like.depth - self.surface.depth,
-                                           self.score_sigma)
+                                           self.config.score_sigma)
         h = Hypothesis(source=like.source, initial_pose=laser, laser_pose=laser, pose=pose,
                        covariance=like.covariance, explained=float(explained), depth=like.depth,
                        refined=True)

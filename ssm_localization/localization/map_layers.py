@@ -20,7 +20,6 @@ from dataclasses import dataclass
 from .correlative import CorrelativeGrid
 from .refine import exact_reach, SurfaceModel
 from .regions import SearchRegions
-from .resolution import effective_score_sigma
 from .voting import PoseVoting
 from ..config.localization import LocalizerConfig
 from ..mapping.index import MapIndex
@@ -54,8 +53,7 @@ def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
                                                          cfg))
     with layer(LAYER_NAMES[1]):
         # exact wherever the refinement, the evidence or the explained fraction can look
-        reach = exact_reach(effective_score_sigma(cfg.score_sigma, m.resolution),
-                            max(cfg.refine_radius))
+        reach = exact_reach(cfg.score_sigma, max(cfg.refine_radius))
         surface = SurfaceModel.from_occupancy(m.occupied_mask(thresh), m.resolution, m.origin,
                                               cfg.surface_depth, reach=reach)
     with layer(LAYER_NAMES[2]):
