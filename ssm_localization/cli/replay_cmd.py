@@ -78,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
             index = build_index(grid, index_cfg, progress=bar)
         print(f'indexed map: {len(index.features)} nodes in {time.perf_counter() - t0:.2f} s')
     localizer = GlobalLocalizer(index, loc_cfg)
+    if localizer.calibration_warning:
+        print(f'note: {localizer.calibration_warning}')
     scans = bag.scans[:args.limit] if args.limit > 0 else bag.scans
     if args.track:
         stamps = [s.stamp for s in scans]

@@ -22,6 +22,10 @@ from pathlib import Path
 #: what "right" means wherever a confidence is fitted or measured: within this of the truth
 RIGHT_XY = 0.5                      # metres
 RIGHT_YAW = math.radians(5.0)       # radians
+#: cell size of the real buildings' maps the models were fitted on (metres; of the simulated
+#: calibration maps the empty room has 0.1 m cells); on real maps of coarser cells the verdict
+#: was measured to be less reliable (``localization.confidence.resolution_warning``)
+CALIBRATION_RESOLUTION = 0.05
 #: reasons the rules refuse an answer before the model is asked, with a neutral rate
 REFUSED_REASONS = {'implausible': 0.0, 'rival': 0.5, 'degenerate': 0.5}
 

@@ -46,7 +46,7 @@ from typing import Literal
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .confidence import confidence
+from .confidence import confidence, resolution_warning
 from .evidence import (beam_fractions, covariance_stds, endpoint_evidence, Evidence,
                        rival_counts)
 from .fusion import lever_arm_covariance
@@ -294,6 +294,15 @@ class GlobalLocalizer:
                                                  retries=0, ransac_hypotheses=1)
         self._node_trees = ([cKDTree(f.points) if len(f.points) else None
                              for f in index.features] if cfg.paper_mode else [])
+
+    @property
+    def calibration_warning(self) -> str:
+        """
+        Return why this map lies outside what the confidence was calibrated on ('' if not).
+
+        A map of coarser cells than the calibration maps' (``confidence.resolution_warning``).
+        """
+        return resolution_warning(self.index.map.resolution)
 
     # -- frames -------------------------------------------------------------------------------
     def base_pose(self, laser_pose: Pose2) -> Pose2:

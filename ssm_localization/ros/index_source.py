@@ -31,6 +31,7 @@ from typing import Any, Callable, NamedTuple
 
 from ssm_localization.config import IndexConfig, LocalizerConfig
 from ssm_localization.config.convert import flatten
+from ssm_localization.localization.confidence import resolution_warning
 from ssm_localization.localization.localizer import GlobalLocalizer
 from ssm_localization.mapping.index import build_index, load_index, MapIndex, save_index
 from ssm_localization.mapping.map_limits import MAX_MAP_CELLS
@@ -355,6 +356,9 @@ class IndexSource:
                 self._write_to = None
         how = 'indexed' if source == MAP_TOPIC else 'loaded'
         self._log.info(f'{source}: {how}, ready, {len(index.node_xy)} nodes')
+        note = resolution_warning(index.map.resolution)
+        if note:
+            self._log.warning(f'{source}: {note}')
         self._on_served(served)
         if write_to is not None:
             write_index(index, write_to, self._log, self._work.save)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from ssm_localization import read_bag, save_map_yaml, write_bag
 from ssm_localization.cli import main
+from ssm_localization.mapping.map_io import OccupancyMap
 
 REQUIRED = ['stamp', 'x', 'y', 'yaw', 'status', 'latency_ms', 'node', 'score']
 
@@ -71,9 +72,22 @@ def test_replay_cli_with_map_file_on_a_bag_without_map(depot_bag, tmp_path, caps
     map_yaml = tmp_path / 'depot.yaml'
     save_map_yaml(bag.map, map_yaml)
     rc = main(['replay', str(no_map), '-o', str(out), '--map', str(map_yaml), '--quiet'])
-    assert rc == 0, capsys.readouterr().err
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert 'coarser' not in captured.out
     _, rows = _read_csv(out)
     assert [r['status'] for r in rows] == ['ok', 'ok']
+    # the same map at 0.1 m cells (each 2 x 2 block occupied if any cell is): told so
+    d = bag.map.data[:bag.map.height // 2 * 2, :bag.map.width // 2 * 2]
+    blocks = d.reshape(d.shape[0] // 2, 2, d.shape[1] // 2, 2)
+    coarse = np.where((blocks >= 65).any(axis=(1, 3)), 100,
+                      np.where((blocks >= 0).any(axis=(1, 3)), 0, -1)).astype(np.int8)
+    coarse_yaml = tmp_path / 'depot_10cm.yaml'
+    save_map_yaml(OccupancyMap(coarse, 0.1, bag.map.origin), coarse_yaml)
+    rc = main(['replay', str(no_map), '-o', str(out), '--map', str(coarse_yaml), '--quiet'])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert "note: the map's cells are 0.1 m, coarser than the 0.05 m" in captured.out
 
 
 def test_replay_cli_bag_without_scans(depot_bag, tmp_path, capsys):

@@ -20,7 +20,8 @@ from ssm_localization.config.confidence import (CONFIDENCE_MODEL, ConfidenceMode
 from ssm_localization.evaluation.calibration import (BOOSTING, fit_confidence, isotonic_knots,
                                                      reliability, tree_values)
 from ssm_localization.files.yaml_input import load_yaml_file
-from ssm_localization.localization.confidence import feature_values, within_circle, within_right
+from ssm_localization.localization.confidence import (feature_values, resolution_warning,
+                                                      within_circle, within_right)
 from ssm_localization.localization.evidence import Evidence, rival_counts, unexplained_runs
 from ssm_localization.localization.verify import check_beams
 from ssm_localization.mapping.map_io import OccupancyMap
@@ -294,3 +295,18 @@ def test_a_scan_of_another_building_is_refused_for_lack_of_evidence():
                                 scan.range_min, scan.range_max)
         assert out.status != 'ok', out.message
         assert out.confidence < loc.config.min_confidence
+
+
+def test_a_map_of_coarser_cells_than_the_calibration_buildings_gets_a_warning():
+    for res in (0.05, 0.05000001, 0.025, 0.01):
+        assert resolution_warning(res) == ''
+    for res in (0.06, 0.1, 0.2):
+        note = resolution_warning(res)
+        assert f'{res:g} m' in note and 'coarser than the 0.05 m' in note
+    for res, warned in ((0.05, False), (0.1, True)):
+        n = int(round(3.0 / res))                   # a 3 m room with a table
+        d = np.zeros((n, n), np.int8)
+        d[:2, :] = d[-2:, :] = d[:, :2] = d[:, -2:] = 100
+        d[n // 4:n // 3, n // 5:n // 2] = 100
+        loc = GlobalLocalizer(build_index(OccupancyMap(d, res)))
+        assert bool(loc.calibration_warning) == warned

@@ -211,6 +211,19 @@ def test_missing_file_is_written_after_indexing_the_topic(harness_factory):
     assert h.saved == ['F'] and h.path.read_text() == 'F'
 
 
+def test_a_map_of_coarser_cells_than_the_calibration_maps_is_served_with_a_warning(
+        harness_factory):
+    h = harness_factory(None)
+    h.source.on_map(FakeMap('G', 'map'))             # 0.05 m cells: no warning
+    h.settle()
+    assert not any('coarser' in w for w in h.log.warnings())
+    h.source.on_map(FakeMap('H', 'map', resolution=0.1))
+    h.settle()
+    assert [s.checksum[:1] for s in h.ready] == ['G', 'H']
+    warned = [w for w in h.log.warnings() if 'coarser' in w]
+    assert len(warned) == 1 and '0.1 m' in warned[0] and 'map topic' in warned[0]
+
+
 def test_same_map_again_and_frame_change(harness_factory):
     h = harness_factory(None)
     h.source.on_map(FakeMap('G', 'map'))
