@@ -52,8 +52,8 @@ from .answers import AnswerLog, decided_by
 from .campus import campus_map, office_30m, site_queries, SiteQueries, write_query_bag
 from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer, FullSearchLocalizer
-from .places import (answers_on, foreign, load_place, MAP_RESOLUTION, real_grid, REAL_PLACES,
-                     SIM_PLACES, sim_queries)
+from .places import (answers_on, foreign, load_place, MAP_RESOLUTION, MapVariant, real_grid,
+                     REAL_PLACES, SIM_PLACES, sim_queries)
 from ..config.params import load_configs
 from ..evaluation.calibration import reliability_report
 from ..evaluation.plotting import plot_reliability, plot_replay
@@ -135,6 +135,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'their clutter variants, the real places of --foreign), metres; '
                              f'default {MAP_RESOLUTION:g}; the nav2 maps and the campus-scale '
                              'sets keep their own')
+    parser.add_argument('--map-dilate', type=int, default=0, metavar='N',
+                        help="the same maps' walls grown by N cells (the thick walls of many "
+                             'SLAM maps); the queries stay those of the map as built')
+    parser.add_argument('--map-specks', type=float, default=0.0, metavar='F',
+                        help='the same maps with a fraction F of their free cells made '
+                             'occupied (seeded specks: passing people, noise)')
     parser.add_argument('--answers', metavar='CSV',
                         help='write every answer of the run (own scans through every sensor, '
                              'foreign scans, campus): set, split, sensor, status, what decided '
@@ -262,6 +268,9 @@ def run(args: argparse.Namespace) -> int:
         sets = [s for s in sets if s not in CAMPUS_SETS] + CAMPUS_SETS
     data, work = data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg = load_configs(args.params)
+    variant = MapVariant(args.map_resolution, args.map_dilate, args.map_specks)
+    if variant != MapVariant():
+        print(f'maps of the real buildings: {variant}', flush=True)
     built: dict[tuple[str, str], object] = {}     # (map, localizer kind): built once per map
 
     def once(map_name: str, kind: str, make):
@@ -287,13 +296,14 @@ def run(args: argparse.Namespace) -> int:
                 print(f'  wrote {bag}', flush=True)
         elif name in REAL_SETS:
             map_name, place = name, load_place(name, data, work, args.real_max,
-                                               resolution=args.map_resolution)
+                                               variant=variant)
             grid, scans = place.grid, place.scans
             truth = dict(zip((s.stamp for s in scans), place.truth))
         elif name in REAL_SIM_SETS:
             map_name, extra = REAL_SIM_SETS[name]
-            grid = real_grid(data, work, REAL_SETS[map_name], resolution=args.map_resolution)
+            grid = real_grid(data, work, REAL_SETS[map_name], resolution=variant.resolution)
             scans, truth = sim_queries(grid, args.n, args.seed, extra)
+            grid = variant.degrade(grid)
         else:
             map_name, extra = SIM_SETS[name]
             grid = load_map_yaml(data / 'maps' / f'{map_name}.yaml')
@@ -411,8 +421,9 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
     with this package's (:class:`FullSearchLocalizer`: what searching every yaw would cost).
     """
     names = args.foreign_places
+    variant = MapVariant(args.map_resolution, args.map_dilate, args.map_specks)
     places = {n: load_place(n, data, work, 0 if n in REAL_PLACES else args.foreign_n, seed=7,
-                            resolution=args.map_resolution)
+                            variant=variant)
               for n in names}
     print(f'foreign scans: {args.foreign_n} scans of each place on the map of each other '
           f'place (ok = a confident pose on a map the scan is not from)', flush=True)

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Iterator, Sequence
 
 import numpy as np
+from scipy import ndimage
 
 from ..config.mapping import MapBuildConfig
 from ..config.simulation import SimulationConfig
@@ -85,6 +86,50 @@ def real_grid(data: Path, work: Path, name: str, log: CarmenLog | None = None,
 
 
 @dataclass(frozen=True)
+class MapVariant:
+    """
+    How a benchmark's real maps differ from those built from the even scans at 0.05 m.
+
+    The queries stay the building's scans (or, for simulated scans on a real map, are cast on
+    the map as built): only the map the localizer is given changes, as a user's map differs
+    from the world. ``resolution``: the cell size the map is built at (metres); ``dilate``: the
+    occupied cells grown by this many cells (8-connected), the thick walls of many SLAM maps
+    (their boundary a cell nearer the free space per cell grown); ``specks``: this fraction of
+    the free cells made occupied (seeded), the specks a map keeps of passing people and noise.
+    """
+
+    resolution: float = MAP_RESOLUTION
+    dilate: int = 0
+    specks: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (self.resolution > 0 and self.dilate >= 0 and 0.0 <= self.specks < 1.0):
+            raise ValueError(f'MapVariant: resolution > 0, dilate >= 0 and specks in [0, 1), '
+                             f'got {self}')
+
+    def degrade(self, grid: OccupancyMap) -> OccupancyMap:
+        """Return ``grid`` with the walls grown and the specks added (itself if neither)."""
+        if not self.dilate and not self.specks:
+            return grid
+        d = grid.data.copy()
+        if self.dilate:
+            grown = ndimage.binary_dilation(d >= 65, np.ones((3, 3), bool),
+                                            iterations=self.dilate)
+            d[grown] = 100
+        if self.specks:
+            free = np.flatnonzero(d.ravel() == 0)
+            rng = np.random.default_rng(0)
+            d.ravel()[rng.choice(free, int(round(self.specks * len(free))), replace=False)] = 100
+        return OccupancyMap(d, grid.resolution, grid.origin, grid.frame_id)
+
+    def __str__(self) -> str:
+        parts = [f'{self.resolution:g} m cells'] + (
+            [f'walls grown by {self.dilate} cells'] if self.dilate else []) + (
+            [f'{self.specks:.2%} of the free cells specks'] if self.specks else [])
+        return ', '.join(parts)
+
+
+@dataclass(frozen=True)
 class Place:
     """A map and query scans with their ground truth (base poses in the map frame)."""
 
@@ -119,16 +164,17 @@ def foreign(a: str, b: str) -> bool:
 
 
 def load_place(name: str, data: Path, work: Path, count: int, seed: int = 1,
-               resolution: float = MAP_RESOLUTION) -> Place:
+               variant: MapVariant = MapVariant()) -> Place:
     """
     Return the place ``name`` with ``count`` queries.
 
-    Real: ``count`` odd-numbered scans evenly spread over the log (0: all), the map built at
-    ``resolution``; simulated: ``count`` random poses (seeded) on the map as shipped.
+    Real: ``count`` odd-numbered scans evenly spread over the log (0: all), the map built and
+    degraded as ``variant`` says; simulated: ``count`` random poses (seeded) on the map as
+    shipped.
     """
     if name in REAL_PLACES:
-        log, grid = real_map(data, work, REAL_PLACES[name], resolution)
-        return Place(name, grid, *odd_scans(log, count))
+        log, grid = real_map(data, work, REAL_PLACES[name], variant.resolution)
+        return Place(name, variant.degrade(grid), *odd_scans(log, count))
     if name in SIM_PLACES:
         grid = load_map_yaml(data / 'maps' / f'{name}.yaml')
         scans, truth = sim_queries(grid, count, seed, {})

@@ -1,0 +1,50 @@
+"""bench/places.py: the map variants of `bench localize` (--map-resolution, -dilate, -specks)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from ssm_localization.bench.places import MAP_RESOLUTION, MapVariant
+from ssm_localization.mapping.map_io import OccupancyMap
+
+
+def _room() -> OccupancyMap:
+    d = np.full((40, 60), -1, np.int8)
+    d[5:35, 5:55] = 0
+    d[5, 5:55] = d[34, 5:55] = 100
+    d[5:35, 5] = d[5:35, 54] = 100
+    return OccupancyMap(d, 0.05, (1.0, -2.0, 0.0))
+
+
+def test_the_default_variant_is_the_map_as_built():
+    room = _room()
+    assert MapVariant().resolution == MAP_RESOLUTION == 0.05
+    assert MapVariant().degrade(room) is room
+    assert str(MapVariant()) == '0.05 m cells'
+
+
+def test_grown_walls_are_a_cell_thicker_on_each_side_per_cell_grown():
+    room = _room()
+    for cells in (1, 2):
+        grown = MapVariant(dilate=cells).degrade(room)
+        assert grown.resolution == room.resolution and grown.origin == room.origin
+        occ = grown.data >= 65
+        assert occ[5 - cells:6 + cells, 20].all() and not occ[6 + cells, 20]
+        assert (grown.data[room.data >= 65] == 100).all()          # nothing taken away
+    assert 'walls grown by 1 cells' in str(MapVariant(dilate=1))
+
+
+def test_specks_occupy_the_given_share_of_the_free_cells_the_same_every_time():
+    room = _room()
+    free = int((room.data == 0).sum())
+    a = MapVariant(specks=0.01).degrade(room)
+    b = MapVariant(specks=0.01).degrade(room)
+    assert np.array_equal(a.data, b.data)
+    assert int((room.data == 0).sum() - (a.data == 0).sum()) == round(0.01 * free)
+    assert ((a.data != room.data) <= (room.data == 0)).all()       # only free cells change
+
+
+@pytest.mark.parametrize('bad', [dict(resolution=0.0), dict(dilate=-1), dict(specks=1.0),
+                                 dict(specks=-0.1)])
+def test_a_variant_out_of_range_is_refused(bad):
+    with pytest.raises(ValueError, match='MapVariant'):
+        MapVariant(**bad)
