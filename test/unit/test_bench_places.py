@@ -1,4 +1,4 @@
-"""bench/places.py: the map variants of `bench localize` (--map-resolution, -dilate, -specks)."""
+"""bench/places.py: the real maps of `bench localize` built coarser, thick-walled or specked."""
 from __future__ import annotations
 
 import numpy as np
