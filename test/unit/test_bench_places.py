@@ -43,8 +43,8 @@ def test_specks_occupy_the_given_share_of_the_free_cells_the_same_every_time():
     assert ((a.data != room.data) <= (room.data == 0)).all()       # only free cells change
 
 
-@pytest.mark.parametrize('bad', [dict(resolution=0.0), dict(dilate=-1), dict(specks=1.0),
-                                 dict(specks=-0.1)])
+@pytest.mark.parametrize('bad', [{'resolution': 0.0}, {'dilate': -1}, {'specks': 1.0},
+                                 {'specks': -0.1}])
 def test_a_variant_out_of_range_is_refused(bad):
     with pytest.raises(ValueError, match='MapVariant'):
         MapVariant(**bad)
