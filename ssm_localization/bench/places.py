@@ -37,7 +37,7 @@ SIM_PLACES = ('depot', 'tb3_sandbox', 'turtlebot3_world', 'empty_room')
 #: maps of one and the same place (TurtleBot3's world and sandbox): never foreign to each other
 SAME_PLACE = (frozenset({'tb3_sandbox', 'turtlebot3_world'}),)
 #: cell size of the maps built from the logs unless a benchmark asks for another (metres): the
-#: map builder's default, the resolution every calibration map had
+#: map builder's default, that of the real buildings the confidence was calibrated on
 MAP_RESOLUTION = MapBuildConfig().resolution
 
 
