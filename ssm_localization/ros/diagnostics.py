@@ -6,8 +6,9 @@ level OK / WARN / ERROR for an ``ok`` / ``ambiguous`` / ``failed`` last localiza
 first localization OK when the map is indexed, WARN while there is no map or it is being
 indexed. Key-values: status, confidence (the calibrated P(right | evidence) of the answer, the
 "am I lost" signal: an ``ok`` answer has at least ``min_confidence``), score, latency_ms, node
-(topological node id), candidates (count), map (``no map`` / ``indexing`` / ``ready``), frame,
-x / y / yaw, lifecycle state, mode.
+(topological node id), candidates (count), map (``no map`` / ``indexing`` / ``ready``),
+map_note (why the served map lies outside what the confidence was calibrated on: a map of
+coarser cells; empty otherwise), frame, x / y / yaw, lifecycle state, mode.
 """
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ def _number(value: Any, fmt: str) -> str:
 
 def localization_status(node_name: str, fqn: str, map_state: str, loc: Any = None,
                         map_detail: str = '', frame: str = '', lifecycle: str = '',
-                        mode: str = '') -> DiagnosticStatus:
+                        mode: str = '', map_note: str = '') -> DiagnosticStatus:
     """Return the status of the last localization ``loc`` (a core Localization, or None)."""
     if map_state not in MAP_STATES:
         raise ValueError(f'map state must be one of {MAP_STATES}, got {map_state!r}')
@@ -56,7 +57,8 @@ def localization_status(node_name: str, fqn: str, map_state: str, loc: Any = Non
                   'candidates': str(len(loc.candidates or ())),
                   'x': _number(pose[0], '.4f'), 'y': _number(pose[1], '.4f'),
                   'yaw': _number(pose[2], '.5f')}
-    values.update({'map': map_state, 'frame': frame, 'lifecycle': lifecycle, 'mode': mode})
+    values.update({'map': map_state, 'map_note': map_note, 'frame': frame,
+                   'lifecycle': lifecycle, 'mode': mode})
     status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     return status
 

@@ -159,6 +159,7 @@ def test_global_localizer_lifecycle_over_change_state(ros, bag):
     values = {v.key: v.value for v in status.values}
     assert status.level == DiagnosticStatus.OK and status.message.startswith('ok')
     assert values['map'] == 'ready' and values['lifecycle'] == 'active'
+    assert values['map_note'] == ''            # 0.05 m cells: what the confidence knows
     assert int(values['node']) >= -1 and float(values['score']) > 0
     assert float(values['latency_ms']) > 0 and int(values['candidates']) == len(cands.poses)
     # the calibrated confidence of an ok answer reaches min_confidence

@@ -4,13 +4,16 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from helpers import shared_data
 import numpy as np
 import pytest
 from sensor_msgs.msg import LaserScan
 from ssm_localization import occupancy_map_from_msg
+from ssm_localization.localization.confidence import resolution_warning
 from ssm_localization.ros import conversions as conv
 from ssm_localization.ros import markers
+from ssm_localization.ros.diagnostics import localization_status
 from visualization_msgs.msg import Marker
 
 pytestmark = pytest.mark.ros
@@ -137,3 +140,14 @@ def test_localization_markers():
                                atol=1e-9)
     failed = SimpleNamespace(pose=None, candidates=[])
     assert markers.localization_markers(failed, 'map', scan_xy_laser=np.ones((3, 2))) == []
+
+
+def test_diagnostics_say_when_the_map_lies_outside_the_calibration():
+    loc = SimpleNamespace(status='ok', pose=(1.0, 2.0, 0.5), confidence=0.99, score=0.9,
+                          latency_ms=30.0, node=3, candidates=[1, 2], message='')
+    for note in ('', resolution_warning(0.1)):
+        status = localization_status('gl', '/gl', 'ready', loc, frame='map', map_note=note)
+        values = {v.key: v.value for v in status.values}
+        assert values['map_note'] == note and values['status'] == 'ok'
+        assert status.level == DiagnosticStatus.OK     # the answer's level; the note beside it
+    assert 'coarser' in resolution_warning(0.1)
