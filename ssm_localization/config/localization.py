@@ -92,6 +92,10 @@ class LocalizerConfig:
                                   'through-wall penalty): failed')
     ambiguity_margin: float = param(0.02, 'a distinct rival scoring within this of the best: '
                                           'ambiguous')
+    rival_contradiction: float = param(
+        0.1, 'a distinct pose that explains at least as much of the scan as the best and sees '
+             'through at most this much more of its beams is a rival too (ambiguous): the best '
+             "then wins only on beams through the map's specks")
     min_confidence: float = param(0.95, 'a pose that passes the rules is ok only when its '
                                         'calibrated confidence P(right | evidence) reaches '
                                         'this (chosen for 99.9 % precision on the calibration '
@@ -133,7 +137,8 @@ class LocalizerConfig:
                        'search_rivals', 'search_max_cells',
                        'refine_iterations', 'polish_iterations', 'surface_depth',
                        'search_min_score', 'contradiction_weight', 'max_contradicting',
-                       'min_score', 'verify_margin', 'ambiguity_margin', 'min_position_std',
+                       'min_score', 'verify_margin', 'ambiguity_margin', 'rival_contradiction',
+                       'min_position_std',
                        'min_yaw_std', 'min_points')
         check_numbers(self, positive, nonnegative)
         if not 0.0 <= self.min_confidence <= 1.0:
