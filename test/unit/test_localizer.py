@@ -428,6 +428,30 @@ def test_verdict_status_policy():
     assert judge([_verified((0.0, 0.0, 0.0), 0.8, 0.9 * cfg.max_position_std)])[0] == 'ok'
 
 
+def test_a_place_that_explains_more_but_sees_through_a_few_more_specks_is_a_rival():
+    cfg = LocalizerConfig()
+
+    def place(x, explained, through):
+        h = _verified((x, 0.0, 0.0), explained)
+        return dataclasses.replace(
+            h, score=explained - through,
+            check=BeamCheck(consistent=1.0 - through, contradicting=through, short=0.0))
+
+    best = place(0.0, 0.89, 0.16)                     # score 0.73
+    for rival, want in [(place(17.0, 0.90, 0.24), 'ambiguous'),    # more explained, +8 % through
+                        (place(17.0, 0.90, 0.27), 'ok'),   # beyond rival_contradiction more
+                        (place(17.0, 0.87, 0.17), 'ok'),   # explains less, scores 0.03 less
+                        (place(0.1, 0.90, 0.20), 'ok')]:   # the same place: no rival
+        status, msg, cov, conf = verdict([best, rival], cfg, STRONG)
+        assert status == want, (rival.explained, rival.contradicting, msg)
+        if want == 'ambiguous':
+            assert 'explains more of the scan, 90% against 89%' in msg
+            assert conf <= 0.5 and cov[0, 0] >= 8.0 ** 2
+    # a rival that explains more but scores too little to be an answer at all is none
+    weak = dataclasses.replace(place(17.0, 0.95, 0.2), score=cfg.min_score - 0.01)
+    assert verdict([best, weak], cfg, STRONG)[0] == 'ok'
+
+
 def test_a_scan_that_sees_only_what_is_right_in_front_is_not_ok():
     """
     Strong evidence in every other way, but 90 % of the scan within a metre: ambiguous.
