@@ -915,8 +915,9 @@ def _explains_more(h: Hypothesis, best: Hypothesis, cfg: LocalizerConfig) -> boo
     such beams are often the map's specks (people and chairs that stood still while it was
     made): a place that explains more of the scan but sees through a few more specks can be
     the right one. On the ACES map with 0.2 % of its free cells made specks (``bench localize
-    --map-specks``) 18 right poses lost to a place turned by 180° that way, ``ok``; this rule
-    makes 7 of them ``ambiguous`` and costs 2 of 4872 right answers on the maps as built.
+    --map-specks``) most of its 18 wrong ``ok`` answers were places turned by 180° that won so;
+    this rule makes 7 of them ``ambiguous`` and costs 5 of 11 500 right answers of ``bench
+    localize --sets all`` on the maps as built (docs/EXPERIMENTS.md).
     """
     return (h.check is not None and h.explained >= best.explained
             and h.contradicting <= best.contradicting + cfg.rival_contradiction
