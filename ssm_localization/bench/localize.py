@@ -147,6 +147,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'it, confidence, right, errors and the evidence features')
 
 
+def map_variant(args: argparse.Namespace) -> MapVariant:
+    """Return the real maps' variant that ``--map-resolution/-dilate/-specks`` ask for."""
+    return MapVariant(args.map_resolution, args.map_dilate, args.map_specks)
+
+
 def _hypothesis_right(localizer: GlobalLocalizer, h: Hypothesis, truth: Pose2) -> bool:
     """Return whether ``h`` was right: its initial pose, or its refined pose once refined."""
     return (within_success(localizer.base_pose(h.initial_pose), truth)
@@ -268,7 +273,7 @@ def run(args: argparse.Namespace) -> int:
         sets = [s for s in sets if s not in CAMPUS_SETS] + CAMPUS_SETS
     data, work = data_dir(args.data), Path(args.work)
     index_cfg, loc_cfg = load_configs(args.params)
-    variant = MapVariant(args.map_resolution, args.map_dilate, args.map_specks)
+    variant = map_variant(args)
     if variant != MapVariant():
         print(f'maps of the real buildings: {variant}', flush=True)
     built: dict[tuple[str, str], object] = {}     # (map, localizer kind): built once per map
@@ -421,7 +426,7 @@ def run_foreign(args: argparse.Namespace, data: Path, work: Path, once, index_cf
     with this package's (:class:`FullSearchLocalizer`: what searching every yaw would cost).
     """
     names = args.foreign_places
-    variant = MapVariant(args.map_resolution, args.map_dilate, args.map_specks)
+    variant = map_variant(args)
     places = {n: load_place(n, data, work, 0 if n in REAL_PLACES else args.foreign_n, seed=7,
                             variant=variant)
               for n in names}

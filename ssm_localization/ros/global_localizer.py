@@ -55,7 +55,6 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
-from ssm_localization.localization.confidence import resolution_warning
 from ssm_localization.localization.localizer import GlobalLocalizer, Localization
 from ssm_localization.ros import markers
 from ssm_localization.ros.conversions import (pose_array, pose_with_covariance, scan_args_from_msg,
@@ -676,7 +675,7 @@ class GlobalLocalizerNode(LifecycleNode):
         with self._state_lock:
             last = self._last
         served = self.source.served
-        note = resolution_warning(served.index.map.resolution) if served is not None else ''
+        note = served.localizer.calibration_warning if served is not None else ''
         status = localization_status(self.get_name(), self.get_fully_qualified_name(),
                                      phase.reported, last, detail, self._frame(served),
                                      state_label(self), self.mode, note)
