@@ -40,7 +40,7 @@ HOT_BATCHES = 4
 _SCORE_CHUNK = 8192
 #: float32 holds every integer below this exactly (sums of up to 65 793 points' likelihoods)
 _FLOAT32_EXACT = 1 << 24
-_EMPTY_POOL = (np.zeros(0, np.int64),) * 3 + (np.zeros(0, np.int8), np.zeros(0))
+_EMPTY_POOL = (np.zeros(0, np.int64), np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -212,12 +212,12 @@ class CorrelativeGrid:
             k = np.repeat(np.arange(n_k), len(rr))
             r = np.tile(rr, n_k)
             c = np.tile(cc, n_k)
+            top_region = 0
         else:
-            labels, allowed = regions
-            k, at = _allowed_windows(labels[rr >> self.depth, cc >> self.depth], allowed)
-            r, c = rr[at], cc[at]
+            lab = regions[0][rr >> self.depth, cc >> self.depth]
+            k, at = _allowed_windows(lab, regions[1])
+            r, c, top_region = rr[at], cc[at], lab[at]
         ub = self._score(self.depth, base(self.depth), k, r, c, norm)
-        lev = np.full(len(k), self.depth, np.int8)
         best = -1.0
         # per region: each region's best leaf (one region, the whole map, without regions)
         labels = regions[0] if regions is not None and region_ratio is not None else None
@@ -228,87 +228,99 @@ class CorrelativeGrid:
         def region(r, c):
             return labels[r >> self.depth, c >> self.depth] if labels is not None else 0
 
-        def bound(r, c):
+        # A window of the pool is one int64 (its yaw, cell, level and region, _WindowKeys) and
+        # its bound: each step of the pool copies two arrays, not five. A window's region is
+        # its top-level window's, so its children inherit it with the rest of the key.
+        keys = _WindowKeys(self.height + top, self.width + top, n_k, self.depth, n_reg)
+        key = keys.pack(k, r, c, self.depth, top_region if labels is not None else 0)
+
+        def bound(key, reg=None):
+            """Return the bound of the windows ``key`` (or of those in regions ``reg``)."""
             if labels is None:
                 return max(min_score, ratio * best)
             # leaves within `ratio` of the best anywhere, and each region's own best
+            reg = keys.region(key) if reg is None else reg
             return np.maximum(max(min_score, floor * best),
-                              np.minimum(ratio * best, best_r[region(r, c)]))
+                              np.minimum(ratio * best, best_r[reg]))
 
         leaves: list[np.ndarray] = []
         complete = True
 
-        def pruned(pool):
-            """Return the windows of ``pool`` whose bound reaches the current one."""
-            keep = pool[4] >= bound(pool[1], pool[2])
-            return tuple(a[keep] for a in pool)
+        def pruned(key, ub):
+            """Return the windows ``key, ub`` whose bound reaches the current one."""
+            keep = ub >= bound(key)
+            return key[keep], ub[keep]
 
         # The pool in two parts: `hot`, the windows whose bound is at least `cut`, is expanded
         # batch by batch; `cold` (the rest, and children below `cut`) waits until `hot` is empty
         # and is then pruned and split again. Each step so works on a few batches' windows, not
         # on the whole pool (up to 10^5 windows on a campus-scale map).
-        cold = [(k, r, c, lev, ub)]
+        cold = [(key, ub)]
         hot = _EMPTY_POOL
         cut = -math.inf
         while True:
             if len(hot[0]):
-                k, r, c, lev, ub = pruned(hot)
-                if not len(k):
+                key, ub = pruned(*hot)
+                if not len(key):
                     hot = _EMPTY_POOL
                     continue
             else:
                 if not cold:
                     break
-                k, r, c, lev, ub = pruned(tuple(np.concatenate(a) for a in zip(*cold)))
-                if not len(k):
+                key, ub = pruned(np.concatenate([p[0] for p in cold]),
+                                 np.concatenate([p[1] for p in cold]))
+                if not len(key):
                     break
                 cold, cut = [], -math.inf
-                if len(k) > hot_batches * batch:
+                if len(key) > hot_batches * batch:
                     cut = float(np.partition(ub, len(ub) - hot_batches * batch)
                                 [len(ub) - hot_batches * batch])
                     up = ub >= cut
-                    cold = [(k[~up], r[~up], c[~up], lev[~up], ub[~up])]
-                    k, r, c, lev, ub = k[up], r[up], c[up], lev[up], ub[up]
+                    cold = [(key[~up], ub[~up])]
+                    key, ub = key[up], ub[up]
             if budget_s is not None and time.perf_counter() - t0 > budget_s:
                 complete = False
                 break
-            if len(k) > batch:
+            if len(key) > batch:
                 take = np.argpartition(-ub, batch - 1)[:batch]
-                rest = np.ones(len(k), bool)
+                rest = np.ones(len(key), bool)
                 rest[take] = False
             else:
-                take = np.arange(len(k))
-                rest = np.zeros(len(k), bool)
-            new = [(k[rest], r[rest], c[rest], lev[rest], ub[rest])]
-            for level in np.unique(lev[take]):
-                sel = take[lev[take] == level]
+                take = np.arange(len(key))
+                rest = np.zeros(len(key), bool)
+            new_key, new_ub = [key[rest]], [ub[rest]]
+            lev = keys.level(key[take])
+            for level in np.unique(lev):
+                parent = key[take[lev == level]]
+                k, r, c = keys.yaw(parent), keys.row(parent), keys.col(parent)
                 half = 1 << (int(level) - 1)
-                ck = np.repeat(k[sel], 4)
-                cr = np.repeat(r[sel], 4) + np.tile((0, 0, half, half), len(sel))
-                cc_ = np.repeat(c[sel], 4) + np.tile((0, half, 0, half), len(sel))
+                ck = np.repeat(k, 4)
+                cr = np.repeat(r, 4) + np.tile((0, 0, half, half), len(parent))
+                cc_ = np.repeat(c, 4) + np.tile((0, half, 0, half), len(parent))
                 # children (windows of `half` cells) that overlap the searched rectangle
                 inside = (cr < r1) & (cr + half > r0) & (cc_ < c1) & (cc_ + half > c0)
                 inside[inside] = self._any_free(int(level) - 1, cr[inside], cc_[inside])
                 ck, cr, cc_ = ck[inside], cr[inside], cc_[inside]
                 sc = self._score(int(level) - 1, base(int(level) - 1), ck, cr, cc_, norm)
+                child = keys.children(parent, half)[inside]
                 if level == 1:
-                    good = sc >= bound(cr, cc_)
+                    good = sc >= bound(child)
                     if good.any():
                         leaves.append(np.column_stack((ck[good], cr[good], cc_[good], sc[good])))
                         best = max(best, float(sc[good].max()))
                         if labels is not None:
-                            np.maximum.at(best_r, region(cr[good], cc_[good]), sc[good])
+                            np.maximum.at(best_r, keys.region(child[good]), sc[good])
                 else:
                     up = sc >= cut
-                    child = (ck, cr, cc_, np.full(len(ck), level - 1, np.int8), sc)
-                    new.append(tuple(a[up] for a in child))
-                    cold.append(tuple(a[~up] for a in child))
-            hot = tuple(np.concatenate(a) for a in zip(*new))
+                    new_key.append(child[up])
+                    new_ub.append(sc[up])
+                    cold.append((child[~up], sc[~up]))
+            hot = (np.concatenate(new_key), np.concatenate(new_ub))
         if not leaves:
             return _empty(complete)
         lv = np.concatenate(leaves)
         rows_, cols_ = lv[:, 1].astype(np.int64), lv[:, 2].astype(np.int64)
-        lv = lv[lv[:, 3] >= bound(rows_, cols_)]
+        lv = lv[lv[:, 3] >= bound(None, region(rows_, cols_))]
         # best first; ties by yaw, row and column, not by when the search found them
         order = np.lexsort((lv[:, 2], lv[:, 1], lv[:, 0], -lv[:, 3]))
         if labels is None:
@@ -485,6 +497,57 @@ def _window_max(grid: np.ndarray, s: int) -> np.ndarray:
     out2 = out.copy()
     np.maximum(out2[:, :-s], out[:, s:], out=out2[:, :-s])
     return out2
+
+
+class _WindowKeys:
+    """
+    One int64 per window of the search's pool: its column, row, yaw, level and region.
+
+    Bit fields, lowest first, each as wide as its largest value needs (rows and columns below
+    ``rows`` and ``cols``, yaws below ``yaws``, levels up to ``depth``, regions below
+    ``regions``). Cells and levels are non-negative, so a child's key is its parent's plus its
+    offset, minus one level.
+    """
+
+    def __init__(self, rows: int, cols: int, yaws: int, depth: int, regions: int) -> None:
+        sizes = (cols, rows, yaws, depth + 1, regions)
+        widths = [max(int(n - 1).bit_length(), 1) for n in sizes]
+        if sum(widths) > 63:
+            raise ValueError(f'CorrelativeGrid.search: {rows} x {cols} cells, {yaws} yaws and '
+                             f'{regions} regions do not fit the window keys')
+        self._shift = np.cumsum([0, *widths[:-1]]).tolist()
+        self._mask = [(1 << w) - 1 for w in widths]
+
+    def pack(self, k, r, c, level: int, region) -> np.ndarray:
+        """Return the keys of the windows at yaws ``k``, cells ``(r, c)``, in ``region``."""
+        sc, sr, sk, sl, sg = self._shift
+        return ((np.asarray(c, np.int64) << sc) | (np.asarray(r, np.int64) << sr)
+                | (np.asarray(k, np.int64) << sk) | (np.int64(level) << sl)
+                | (np.asarray(region, np.int64) << sg))
+
+    def _field(self, key: np.ndarray, i: int) -> np.ndarray:
+        return (key >> self._shift[i]) & self._mask[i]
+
+    def col(self, key: np.ndarray) -> np.ndarray:
+        return self._field(key, 0)
+
+    def row(self, key: np.ndarray) -> np.ndarray:
+        return self._field(key, 1)
+
+    def yaw(self, key: np.ndarray) -> np.ndarray:
+        return self._field(key, 2)
+
+    def level(self, key: np.ndarray) -> np.ndarray:
+        return self._field(key, 3)
+
+    def region(self, key: np.ndarray) -> np.ndarray:
+        return key >> self._shift[4]
+
+    def children(self, key: np.ndarray, half: int) -> np.ndarray:
+        """Return the keys of the four windows of ``half`` cells in each window of ``key``."""
+        sc, sr, _, sl, _ = self._shift
+        step = np.array([0, half << sc, half << sr, (half << sr) + (half << sc)], np.int64)
+        return (np.repeat(key - (np.int64(1) << sl), 4) + np.tile(step, len(key)))
 
 
 def _allowed_windows(lab: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -302,6 +302,27 @@ def test_how_many_windows_a_step_expands_changes_no_leaf():
             grid.search(pts, batch=batch, hot_batches=hot, **kw)
 
 
+def test_a_window_key_holds_its_yaw_cell_level_and_region():
+    """The pool's int64 keys: each field back as packed; a child's key is its fields' key."""
+    keys = correlative._WindowKeys(rows=6000, cols=7000, yaws=360, depth=4, regions=900)
+    rng = np.random.default_rng(3)
+    n = 1000
+    k, r, c = rng.integers(0, 360, n), rng.integers(0, 6000, n), rng.integers(0, 7000, n)
+    level, region = 3, rng.integers(0, 900, n)
+    key = keys.pack(k, r, c, level, region)
+    assert key.dtype == np.int64 and np.all(key >= 0)
+    assert np.array_equal(keys.yaw(key), k) and np.array_equal(keys.row(key), r)
+    assert np.array_equal(keys.col(key), c) and np.all(keys.level(key) == level)
+    assert np.array_equal(keys.region(key), region)
+    child = keys.children(key[:5], 4)
+    dr, dc = np.tile((0, 0, 4, 4), 5), np.tile((0, 4, 0, 4), 5)
+    assert np.array_equal(child, keys.pack(np.repeat(k[:5], 4), np.repeat(r[:5], 4) + dr,
+                                           np.repeat(c[:5], 4) + dc, level - 1,
+                                           np.repeat(region[:5], 4)))
+    with pytest.raises(ValueError, match='do not fit the window keys'):
+        correlative._WindowKeys(rows=1 << 30, cols=1 << 30, yaws=360, depth=4, regions=1)
+
+
 def test_large_maps_are_searched_on_coarser_cells():
     """The search grid is capped: 2, 4, ... map cells a search cell, the fewest that fit."""
     cfg = LocalizerConfig(search_max_cells=8_000_000)
