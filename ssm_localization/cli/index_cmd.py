@@ -33,6 +33,10 @@ def run(args: argparse.Namespace) -> int:
     with TqdmProgress('index', enabled=not args.quiet) as bar:
         index = build_index(occ_map, config, progress=bar)
     elapsed = time.perf_counter() - t0
+    if len(index) == 0:     # the localizer would refuse it: no file that cannot be used
+        raise ValueError(f'{args.map}: the map gives no nodes (no free space with walls around '
+                         f'it at {occ_map.resolution:g} m a cell): nothing to localize against, '
+                         f'{args.output} not written')
     path = save_index(index, args.output)
     kinds = ', '.join(f'{name} {n}' for name, n in index.kind_counts().items())
     print(f'{len(index)} nodes ({kinds}); built in {elapsed:.2f} s; '

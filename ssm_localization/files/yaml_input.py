@@ -69,13 +69,30 @@ def expanded_size(root: yaml.Node, limit: int = MAX_YAML_NODES) -> int:
 
 
 class BoundedSafeLoader(yaml.SafeLoader):
-    """``yaml.SafeLoader`` that checks :func:`expanded_size` before constructing a document."""
+    """
+    ``yaml.SafeLoader`` that checks :func:`expanded_size` and refuses duplicate keys.
+
+    PyYAML keeps the last of two equal keys of a mapping without a word (``resolution: 0.05``
+    then ``resolution: 5``); YAML 1.2 calls such a document invalid, and so does this loader.
+    """
 
     max_nodes = MAX_YAML_NODES
 
     def construct_document(self, node: yaml.Node) -> Any:
         expanded_size(node, self.max_nodes)
         return super().construct_document(node)
+
+    def construct_mapping(self, node: yaml.Node, deep: bool = False) -> Any:
+        if isinstance(node, yaml.MappingNode):
+            seen: set[tuple[str, str]] = set()
+            for key, _ in node.value:
+                if not isinstance(key, yaml.ScalarNode) or key.tag == 'tag:yaml.org,2002:merge':
+                    continue
+                if (key.tag, key.value) in seen:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f'duplicate key {clip(key.value)!r}', key.start_mark)
+                seen.add((key.tag, key.value))
+        return super().construct_mapping(node, deep=deep)
 
 
 def parse_yaml(data: bytes | str, where: str) -> Any:

@@ -8,6 +8,7 @@ package is installed) and a ``RuntimeWarning``.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Iterator
 import warnings
@@ -17,7 +18,7 @@ import numpy as np
 from .bag_records import (BagData, BagError, GT_TOPIC, MAP_TOPIC, ODOM_TOPIC, SCAN_TOPIC,
                           SCAN_TYPE, ScanRecord, typestore)
 from ..files.yaml_input import load_yaml_file
-from ..mapping.map_limits import MAX_MAP_CELLS
+from ..mapping.map_limits import MAX_MAP_CELLS, MAX_ORIGIN
 from ..mapping.occupancy import occupancy_map_from_msg
 from ..progress import ProgressCallback
 from ..transforms import Pose2, quaternion_to_yaw
@@ -27,14 +28,22 @@ def _stamp_of(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def _pose_of(pose_msg, path: Path, topic: str) -> Pose2:
-    """Return ``(x, y, yaw)`` of a geometry_msgs/Pose; ``BagError`` for a zero quaternion."""
+def _pose_of(pose_msg) -> Pose2 | str:
+    """
+    Return ``(x, y, yaw)`` of a geometry_msgs/Pose, or why it is no pose.
+
+    A zero or non-finite quaternion and non-finite or implausibly far coordinates (beyond
+    ``map_limits.MAX_ORIGIN``) make no pose, as the node's odometry buffer drops them.
+    """
     q = pose_msg.orientation
     try:
         yaw = quaternion_to_yaw(q.x, q.y, q.z, q.w)
     except ValueError as exc:
-        raise BagError(f'{path}: {topic}: {exc}') from None
-    return (float(pose_msg.position.x), float(pose_msg.position.y), yaw)
+        return str(exc)
+    x, y = float(pose_msg.position.x), float(pose_msg.position.y)
+    if not (math.isfinite(x) and math.isfinite(y)) or max(abs(x), abs(y)) > MAX_ORIGIN:
+        return f'position ({x:g}, {y:g}) is not finite or beyond {MAX_ORIGIN:g} m'
+    return (x, y, yaw)
 
 
 def _resolve(path: str | Path) -> Path:
@@ -221,7 +230,8 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
     that cannot be opened or lacks ``scan_topic`` (unless ``require_scans=False``),
     :class:`~ssm_localization.mapping.map_limits.MapTooLargeError` for a /map of more than
     ``max_map_cells`` cells (0: no limit). A bag cut short mid-file yields its readable prefix
-    with a ``RuntimeWarning``.
+    with a ``RuntimeWarning``; so do /odom and /ground_truth messages with no valid pose (a zero
+    or non-finite quaternion, non-finite coordinates), which are skipped, as the node does.
     """
     rd = _Reader(path)
     try:
@@ -230,6 +240,7 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
         topics = {scan_topic, GT_TOPIC, ODOM_TOPIC} | ({MAP_TOPIC} if read_map else set())
         total = sum(rd.counts.get(t, 0) for t in topics)
         occ_map, scans, gt, od = None, [], {}, {}
+        skipped: dict[str, list[str]] = {}
         for n, (topic, msg) in enumerate(rd.messages(topics), 1):
             if topic == scan_topic:
                 scans.append(_scan_record(msg))
@@ -238,11 +249,16 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
                     occ_map = occupancy_map_from_msg(msg, max_map_cells)
                 except ValueError as exc:
                     raise type(exc)(f'{rd.path}: {MAP_TOPIC}: {exc}') from None
-            elif topic == GT_TOPIC:
-                gt[_stamp_of(msg.header)] = _pose_of(msg.pose, rd.path, topic)
-            elif topic == ODOM_TOPIC:
-                od[_stamp_of(msg.header)] = _pose_of(msg.pose.pose, rd.path, topic)
+            elif topic in (GT_TOPIC, ODOM_TOPIC):
+                pose = _pose_of(msg.pose if topic == GT_TOPIC else msg.pose.pose)
+                if isinstance(pose, str):
+                    skipped.setdefault(topic, []).append(pose)
+                else:
+                    (gt if topic == GT_TOPIC else od)[_stamp_of(msg.header)] = pose
             _progress_step(progress, n, total)
+        for topic, reasons in skipped.items():
+            warnings.warn(f'{rd.path}: {topic}: {len(reasons)} message(s) with no valid pose '
+                          f'skipped (the first: {reasons[0]})', RuntimeWarning, stacklevel=2)
         return BagData(map=occ_map, scans=scans, ground_truth=gt, odom=od,
                        topic_counts=dict(rd.counts))
     finally:

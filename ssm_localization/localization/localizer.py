@@ -63,7 +63,8 @@ from ..matching.features import prepare_scan, ScanFeatures
 from ..matching.matcher import match_features, spectral_score, spectral_solution
 from ..matching.pairwise import affinity_matrix, angle_table, distance_table
 from ..matching.ransac import ransac_hypotheses
-from ..matching.scan import MAX_RANGE, ranges_to_points
+from ..matching.scan import (MAX_RANGE, ranges_to_points, scan_geometry_problem, sensor_range,
+                             thinned)
 from ..matching.spectral import binarize, leading_eigenvector, matching_score
 from ..progress import LayerHook, no_layers
 from ..transforms import apply, compose, inverse, Pose2, wrap_angle
@@ -203,7 +204,7 @@ def scan_beams(ranges, angle_min: float, angle_increment: float, range_min: floa
     ranges = np.asarray(ranges, dtype=float).ravel()
     angles = angle_min + angle_increment * np.arange(len(ranges))
     with np.errstate(invalid='ignore'):
-        keep = (((ranges >= range_min) & (ranges <= min(range_max, MAX_RANGE)))
+        keep = (((ranges >= range_min) & (ranges <= min(sensor_range(range_max), MAX_RANGE)))
                 | (ranges == np.inf))
     return angles[keep], ranges[keep]
 
@@ -215,11 +216,6 @@ def pick_beams(angles: np.ndarray, beams: np.ndarray, count: int,
         return angles, beams
     pick = np.unique(np.linspace(0, len(angles) - 1, count).astype(int))
     return angles[pick], np.where(beams[pick] > max_range, np.inf, beams[pick])
-
-
-def sensor_range(range_max: float) -> float:
-    """Return a scan's ``range_max`` as the sensor's range (not positive or NaN: unlimited)."""
-    return float(range_max) if range_max == range_max and range_max > 0 else math.inf
 
 
 def distinct(a: Pose2, b: Pose2, xy: float, yaw: float) -> bool:
@@ -357,9 +353,16 @@ class GlobalLocalizer:
 
         The beams of the ray check are the readings within ``[range_min, range_max]`` and the
         ``+inf`` ones (no return, REP 117); NaN, ``-inf`` and finite readings outside the range
-        are no measurement at all and are left out.
+        are no measurement at all and are left out. Fields that make no scan
+        (``scan_geometry_problem``: the node refuses the same) raise ``ValueError``; a scan of
+        more than ``MAX_BEAMS`` beams is thinned to every k-th beam.
         """
         ranges = np.asarray(ranges, dtype=float).ravel()
+        problem = scan_geometry_problem(len(ranges), float(angle_min), float(angle_increment),
+                                        float(range_min), float(range_max))
+        if problem is not None:
+            raise ValueError(problem)
+        ranges, angle_increment = thinned(ranges, angle_increment)
         points, _ = ranges_to_points(ranges, angle_min, angle_increment, range_min, range_max)
         angles, beams = scan_beams(ranges, angle_min, angle_increment, range_min, range_max)
         return self.prepare_points(points, angles, beams, range_max)

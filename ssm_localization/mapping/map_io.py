@@ -14,7 +14,7 @@ import numpy as np
 from PIL import Image
 
 from .map_image import read_shade
-from .map_limits import check_resolution, MAX_MAP_CELLS
+from .map_limits import check_origin, check_resolution, MAX_MAP_CELLS
 from .occupancy import (canonical, fits_float32, FLOAT32_MAX,  # noqa: F401 - re-exported
                         occupancy_map_from_msg, OccupancyMap)
 from ..files.reading import echo, input_file
@@ -56,7 +56,7 @@ def _field(doc: dict, name: str, path: Path, kind, required: bool = True, defaul
             if any(isinstance(v, bool) for v in value) or not all(map(math.isfinite, out3)):
                 raise TypeError
             return out3
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):     # OverflowError: a 400-digit integer
         pass
     want = {float: 'a number', bool: '0/1 or true/false', str: 'a non-empty string',
             'origin': 'a list [x, y, yaw] of 3 numbers'}[kind]
@@ -84,9 +84,10 @@ def load_map_yaml(path: str | Path, max_cells: int = MAX_MAP_CELLS) -> Occupancy
     resolution = _field(doc, 'resolution', path, float)
     check_resolution(resolution, str(path))
     origin = _field(doc, 'origin', path, 'origin')
-    if not all(map(fits_float32, (resolution, *origin))):
-        raise ValueError(f"{path}: fields 'resolution' and 'origin' must be within float32 "
-                         f'range (|v| <= {FLOAT32_MAX:.3g}), as map messages carry them')
+    if not fits_float32(resolution):
+        raise ValueError(f"{path}: field 'resolution' must be within float32 range (|v| <= "
+                         f'{FLOAT32_MAX:.3g}), as map messages carry it')
+    check_origin(origin, str(path))
     negate = _field(doc, 'negate', path, bool, required=False, default=False)
     occ_t = _field(doc, 'occupied_thresh', path, float, required=False, default=0.65)
     free_t = _field(doc, 'free_thresh', path, float, required=False, default=0.25)

@@ -12,6 +12,8 @@ between buildings cost less (the 27.6 M-cell campus: 0.9 GB).
 """
 from __future__ import annotations
 
+import math
+
 #: default limit: 36 M cells (a 300 m x 300 m site at 5 cm); 0 disables the guard
 MAX_MAP_CELLS = 36_000_000
 
@@ -20,6 +22,13 @@ MAX_MAP_CELLS = 36_000_000
 #: 10 m is a unit mistake (a resolution in mm or km), not a map to localize in
 MIN_RESOLUTION = 1e-3
 MAX_RESOLUTION = 10.0
+
+
+#: map origins accepted: x and y within this many metres of 0 (UTM northings reach 1e7 m; a
+#: float64 resolves 1.5e-8 m at 1e8, a 1e16 origin only 2 m), the yaw within a full turn either
+#: way (beyond it a yaw in degrees, or a field never set)
+MAX_ORIGIN = 1e8
+MAX_ORIGIN_YAW = 2.0 * math.pi + 1e-3
 
 
 class MapTooLargeError(ValueError):
@@ -53,3 +62,22 @@ def check_resolution(resolution: float, where: str = 'map') -> float:
         raise ValueError(f'{where}: resolution {res!r} m per cell is outside '
                          f'[{MIN_RESOLUTION}, {MAX_RESOLUTION}] (a unit mistake?)')
     return res
+
+
+def check_origin(origin, where: str = 'map') -> tuple[float, float, float]:
+    """
+    Return ``origin`` as ``(x, y, yaw)`` floats if it is a plausible map origin.
+
+    ``ValueError`` naming ``where`` unless all three are finite, ``|x|, |y| <=``
+    :data:`MAX_ORIGIN` and ``|yaw| <=`` :data:`MAX_ORIGIN_YAW`.
+    """
+    x, y, yaw = (float(v) for v in origin)
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
+        raise ValueError(f'{where}: origin ({x!r}, {y!r}, {yaw!r}) must be finite')
+    if max(abs(x), abs(y)) > MAX_ORIGIN:
+        raise ValueError(f'{where}: origin ({x:g}, {y:g}) lies more than {MAX_ORIGIN:g} m from '
+                         '0, where coordinates lose their precision (shift the map frame)')
+    if abs(yaw) > MAX_ORIGIN_YAW:
+        raise ValueError(f'{where}: origin yaw {yaw:g} rad lies beyond a full turn (degrees '
+                         'for radians?)')
+    return x, y, yaw

@@ -14,11 +14,12 @@ import math
 
 import numpy as np
 
-from .map_limits import check_map_cells, check_resolution
+from .map_limits import check_map_cells, check_origin, check_resolution
 from ..files.reading import echo
 from ..transforms import apply, planar_yaw
 
-#: largest magnitude of the resolution and origin: nav_msgs/OccupancyGrid carries them as float32
+#: largest magnitude of the resolution (nav_msgs/MapMetaData carries it as float32) and of the
+#: origin's fields (checked against :data:`map_limits.MAX_ORIGIN` too)
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -31,9 +32,11 @@ def canonical(v: float) -> float:
     """
     Return the shortest decimal that rounds to the same float32 as ``v``.
 
-    nav_msgs/OccupancyGrid carries the resolution and origin as float32, a map YAML file as
-    decimals: ``0.05`` arrives as ``0.05000000074505806`` over the wire. Every map is stored with
-    the canonical value, so the same map gives the same numbers, whichever way it came.
+    nav_msgs/MapMetaData carries the resolution as float32, a map YAML file as a decimal:
+    ``0.05`` arrives as ``0.05000000074505806`` over the wire. The origin's yaw travels as a
+    quaternion and comes back with rounding noise. Every map is stored with the canonical
+    resolution and yaw, so the same map gives the same numbers, whichever way it came (the
+    origin's x and y are float64 both ways and kept as they are).
     """
     return float(np.format_float_positional(np.float32(v), unique=True, trim='0'))
 
@@ -64,10 +67,13 @@ class OccupancyMap:
         if len(origin) != 3 or not all(map(fits_float32, origin)):
             raise ValueError(f'OccupancyMap.origin: expected finite (x, y, yaw) within float32 '
                              f'range, got {echo(self.origin)}')
+        check_origin(origin, 'OccupancyMap')
         check_resolution(res, 'OccupancyMap')
         object.__setattr__(self, 'data', np.ascontiguousarray(data, dtype=np.int8))
         object.__setattr__(self, 'resolution', canonical(res))
-        object.__setattr__(self, 'origin', tuple(canonical(v) for v in origin))
+        # the origin's x and y travel as float64 (geometry_msgs/Pose): kept as they are, since
+        # rounding them to float32 would move a map with a UTM origin (5e6 m) by up to 0.25 m
+        object.__setattr__(self, 'origin', (origin[0], origin[1], canonical(origin[2])))
         object.__setattr__(self, 'frame_id', str(self.frame_id))
 
     @property

@@ -18,6 +18,7 @@ from geometry_msgs.msg import Pose, PoseArray, PoseStamped, PoseWithCovarianceSt
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
 from sensor_msgs.msg import LaserScan
+from ssm_localization.matching.scan import scan_geometry_problem, sensor_range
 from ssm_localization.transforms import quaternion_to_yaw, yaw_to_quaternion
 
 # Index of x, y, yaw in the row-major 6x6 covariance of geometry_msgs (x, y, z, roll, pitch, yaw).
@@ -46,21 +47,21 @@ def scan_args_from_msg(msg: LaserScan) -> ScanArgs:
 
 
 def scan_problem(args: ScanArgs, min_points: int = 3) -> str | None:
-    """Return why a scan cannot be localized (a short reason), or None when it is usable."""
+    """
+    Return why a scan cannot be localized (a short reason), or None when it is usable.
+
+    The fields' checks are the core's (``matching.scan.scan_geometry_problem``), so the node,
+    ``replay`` and the Python API refuse the same scans; then at least ``min_points`` readings.
+    """
     n = args.ranges.size
     if n == 0:
         return 'empty scan (no ranges)'
-    if not math.isfinite(args.angle_min) or not math.isfinite(args.angle_increment):
-        return f'non-finite angle_min/angle_increment ({args.angle_min}, {args.angle_increment})'
-    if args.angle_increment == 0.0:
-        return 'angle_increment is 0'
-    if abs(args.angle_increment) * (n - 1) > 2.0 * math.pi + 1e-3:
-        return (f'{n} beams x angle_increment {args.angle_increment:g} rad span more than a '
-                'full turn')
-    if math.isnan(args.range_min) or math.isnan(args.range_max):
-        return 'range_min/range_max is NaN'
+    problem = scan_geometry_problem(n, args.angle_min, args.angle_increment, args.range_min,
+                                    args.range_max)
+    if problem is not None:
+        return problem
     lo = args.range_min if math.isfinite(args.range_min) else 0.0
-    hi = args.range_max if args.range_max > 0 else math.inf
+    hi = sensor_range(args.range_max)
     with np.errstate(invalid='ignore'):
         valid = np.isfinite(args.ranges) & (args.ranges >= lo) & (args.ranges <= hi)
     count = int(valid.sum())
@@ -74,7 +75,7 @@ def scan_points(args: ScanArgs) -> np.ndarray:
     """(N, 2) points of the valid beams, in the laser frame (for markers)."""
     angles = args.angle_min + args.angle_increment * np.arange(args.ranges.size)
     lo = args.range_min if math.isfinite(args.range_min) else 0.0
-    hi = args.range_max if args.range_max > 0 else math.inf
+    hi = sensor_range(args.range_max)
     with np.errstate(invalid='ignore'):
         ok = np.isfinite(args.ranges) & (args.ranges >= lo) & (args.ranges <= hi)
     r = args.ranges[ok]

@@ -110,6 +110,23 @@ def test_negative_increment_passes_through(tmp_path):
     assert got[0].angle_increment < 0 and got[0].angle_max < got[0].angle_min
 
 
+def test_odometry_and_ground_truth_without_a_valid_pose_are_skipped(tmp_path):
+    """A NaN odometry pose or a ground truth 1e300 m away: skipped with a warning, not fatal."""
+    scans = _scans(4)
+    odom, gt = _poses(scans, 3.0), _poses(scans)
+    odom[scans[1].stamp] = (math.nan, 0.0, 0.0)
+    gt[scans[2].stamp] = (1e300, 0.0, 0.0)
+    path = write_bag(tmp_path / 'bad_poses', scans=scans, ground_truth=gt, odom=odom)
+    with pytest.warns(RuntimeWarning) as caught:
+        got = read_bag(path)
+    text = ' '.join(str(w.message) for w in caught)
+    assert '/odom: 1 message(s) with no valid pose skipped' in text
+    assert '/ground_truth: 1 message(s) with no valid pose skipped' in text
+    kept = sorted(s.stamp for i, s in enumerate(scans) if i != 1)
+    assert len(got.scans) == 4 and sorted(got.odom) == kept
+    assert len(got.ground_truth) == 3 and all(math.isfinite(p[0]) for p in got.odom.values())
+
+
 def test_missing_bag(tmp_path):
     with pytest.raises(FileNotFoundError, match='nope'):
         read_bag(tmp_path / 'nope')

@@ -21,8 +21,8 @@ from ssm_localization.localization.localizer import Hypothesis, STATUSES, verdic
 from ssm_localization.localization.verify import BeamCheck
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
-from ssm_localization.matching.scan import ranges_to_points
-from ssm_localization.transforms import wrap_angle
+from ssm_localization.matching.scan import MAX_BEAMS, ranges_to_points
+from ssm_localization.transforms import quaternion_to_yaw, wrap_angle, yaw_to_quaternion
 
 OFFSET = (0.25, -0.12, 0.6)      # a laser mounted off-centre and turned on the base
 
@@ -553,24 +553,60 @@ def test_a_scan_of_another_building_is_not_ok(rooms):
 
 def test_float32_and_float64_map_metadata_give_the_same_answers(depot):
     """
-    A map over the wire (float32 resolution and origin) and from a YAML file (decimals) is one map.
+    A map over the wire and from a YAML file (decimals) is one map.
 
-    The same cells, the same checksum, the same nodes and the same answers.
+    nav_msgs/MapMetaData carries the resolution as float32, the origin as a float64 position
+    and a quaternion: the same cells, the same checksum, the same nodes and the same answers.
     """
     bag, _ = depot
     occ = bag.map
+    yaw = quaternion_to_yaw(*yaw_to_quaternion(occ.origin[2] + 0.3))
+    yaml_map = OccupancyMap(occ.data, occ.resolution, (occ.origin[0], occ.origin[1],
+                                                       occ.origin[2] + 0.3))
     wire = OccupancyMap(occ.data, float(np.float32(occ.resolution)),
-                        tuple(float(np.float32(v)) for v in occ.origin))
+                        (occ.origin[0], occ.origin[1], yaw))
     assert float(np.float32(0.05)) != 0.05                     # what a message carries
-    assert wire.resolution == occ.resolution and wire.origin == occ.origin
-    assert wire.checksum() == occ.checksum()
-    a, b = GlobalLocalizer(build_index(occ)), GlobalLocalizer(build_index(wire))
+    assert wire.resolution == yaml_map.resolution and wire.origin == yaml_map.origin
+    assert wire.checksum() == yaml_map.checksum()
+    a, b = GlobalLocalizer(build_index(yaml_map)), GlobalLocalizer(build_index(wire))
     assert np.array_equal(a.index.node_xy, b.index.node_xy)
     for scan in bag.scans[:4]:
         args = (scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
                 scan.range_max)
         x, y = a.localize_scan(*args), b.localize_scan(*args)
         assert (x.status, x.pose) == (y.status, y.pose)
+
+
+def test_a_map_with_a_utm_origin_keeps_its_centimetres(depot):
+    """
+    An origin of (500 000.27, 5 000 000.31) m is kept as it is, not rounded to float32.
+
+    float32 resolves 0.5 m at 5e6: the poses would be off by a quarter metre.
+    """
+    bag, _ = depot
+    occ = bag.map
+    dx, dy = 500_000.27, 5_000_000.31
+    far = OccupancyMap(occ.data, occ.resolution, (occ.origin[0] + dx, occ.origin[1] + dy,
+                                                  occ.origin[2]))
+    assert far.origin[:2] == (occ.origin[0] + dx, occ.origin[1] + dy)
+    assert abs(float(np.float32(far.origin[1])) - far.origin[1]) > 0.05
+    loc = GlobalLocalizer(build_index(far))
+    for scan in bag.scans[:3]:
+        out = loc.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
+                                scan.range_min, scan.range_max)
+        gx, gy, gyaw = bag.ground_truth[scan.stamp]
+        _assert_close(out, (gx + dx, gy + dy, gyaw))
+
+
+def test_implausible_map_origins_are_refused():
+    data = np.zeros((10, 10), np.int8)
+    for origin, why in (((1e16, 0.0, 0.0), 'lose their precision'),
+                        ((0.0, -2e8, 0.0), 'lose their precision'),
+                        ((0.0, 0.0, 180.0), 'degrees for radians')):
+        with pytest.raises(ValueError, match=why):
+            OccupancyMap(data, 0.05, origin)
+    edge = OccupancyMap(data, 0.05, (-1e8, 1e8, -2 * math.pi)).origin
+    assert edge[:2] == (-1e8, 1e8) and edge[2] == pytest.approx(-2 * math.pi, abs=1e-6)
 
 
 # --------------------------------------------------------------------------- bad input
@@ -587,14 +623,36 @@ INC = 2 * math.pi / 360
     (np.full(360, 2.0), -math.pi, 0.0, 'angle_increment'),
     (np.full(360, 2.0), float('nan'), INC, 'finite'),
     (np.full(360, 2.0), -math.pi, float('inf'), 'finite'),
+    (np.full(360, 2.0), -180.0, INC, 'degrees for radians'),
+    (np.full(720, 2.0), -math.pi, INC, 'more than a full turn'),
 ], ids=['empty', 'all-inf', 'all-nan', 'negative', 'few', 'zero-increment', 'nan-angle',
-        'inf-increment'])
+        'inf-increment', 'angle-in-degrees', 'two-turns'])
 def test_bad_scans_fail_cleanly(localizer, ranges, angle_min, inc, why):
     out = localizer.localize_scan(ranges, angle_min, inc, 0.05, 30.0)
     assert out.status == 'failed' and not out.ok
     assert out.pose is None and out.candidates == [] and math.isnan(out.score)
     assert why in out.message
     assert out.node == -1
+
+
+def test_the_core_reads_range_max_0_as_no_limit_and_thins_huge_scans(depot, localizer):
+    """
+    ``range_max`` 0 (unset by a driver) is no limit, as in the node; 200 000 beams are thinned.
+
+    A scan of that many beams (a bad publisher) is thinned to ``MAX_BEAMS`` and still answered.
+    """
+    bag, _ = depot
+    s = bag.scans[1]
+    out = localizer.localize_scan(s.ranges, s.angle_min, s.angle_increment, s.range_min, 0.0)
+    _assert_close(out, bag.ground_truth[s.stamp])
+    n = len(s.ranges)
+    k = -(-200_000 // n)
+    dense = np.repeat(np.asarray(s.ranges, float), k)      # each beam k times, k x as fine
+    inc = s.angle_increment / k
+    out = localizer.localize_scan(dense, s.angle_min - 0.5 * s.angle_increment + 0.5 * inc,
+                                  inc, s.range_min, s.range_max)
+    assert len(dense) > 10 * MAX_BEAMS and out.ok
+    _assert_close(out, bag.ground_truth[s.stamp], xy=0.05, yaw_deg=1.0)
 
 
 def test_min_points_is_configurable(depot):

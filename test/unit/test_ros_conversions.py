@@ -39,6 +39,10 @@ def test_scan_args_and_problems():
     assert 'full turn' in conv.scan_problem(conv.scan_args_from_msg(_scan([1.0] * 10, inc=1.0)))
     # negative increments are legal (mirrored scanners)
     assert conv.scan_problem(conv.scan_args_from_msg(_scan([1.0] * 10, inc=-0.01))) is None
+    assert 'degrees for radians' in conv.scan_problem(
+        conv.scan_args_from_msg(_scan([1.0] * 10, angle_min=-180.0)))
+    # range_max 0 (a driver that leaves it unset): no limit, here and in the core alike
+    assert conv.scan_problem(conv.scan_args_from_msg(_scan([1.0] * 10, rmax=0.0))) is None
 
 
 def test_scan_points_drop_invalid():
