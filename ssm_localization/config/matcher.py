@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 from .fields import param
 
@@ -12,6 +13,14 @@ PREPARE_FIELDS = ('max_points', 'min_spacing', 'context_spacing', 'tangent_metho
 LEARNED_WEIGHTS = (1.04795, -129.019, -0.0759161)
 #: hand-set weights: sigma_d = 50 mm, sigma_theta = 0.2 rad, w0 = 3
 HAND_WEIGHTS = (3.0, -200.0, -12.5)
+#: the settings that must be > 0, >= 0 and >= 1 (lengths, tolerances; off-switches; counts)
+_POSITIVE = ('min_spacing', 'context_spacing', 'tangent_radius', 'gap', 'desc_radius',
+             'max_dist_deform', 'max_angle_deform', 'power_tol', 'ransac_threshold',
+             'icp_max_dist', 'icp_min_dist', 'normal_radius', 'polish_gate', 'overlap_dist')
+_NONNEGATIVE = ('length_cap', 'binarize_min_ratio', 'ransac_min_span', 'icp_min_spacing',
+                'retry_overlap', 'icp_iterations', 'polish_iterations', 'retries', 'seed')
+_AT_LEAST_ONE = ('desc_radial_bins', 'desc_angular_bins', 'power_iterations',
+                 'ransac_iterations', 'ransac_hypotheses', 'min_inliers', 'icp_max_points')
 
 
 @dataclass(frozen=True)
@@ -81,3 +90,19 @@ class MatcherConfig:
         if len(self.weights) != 3:
             raise ValueError('MatcherConfig.weights must have 3 values (eq. 4)')
         object.__setattr__(self, 'weights', tuple(float(v) for v in self.weights))
+        for name in _POSITIVE:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f'MatcherConfig.{name} must be a finite number > 0, '
+                                 f'got {value!r}')
+        for name in _NONNEGATIVE:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f'MatcherConfig.{name} must be a finite number >= 0, '
+                                 f'got {value!r}')
+        for name in _AT_LEAST_ONE:
+            if getattr(self, name) < 1:
+                raise ValueError(f'MatcherConfig.{name} must be >= 1, '
+                                 f'got {getattr(self, name)!r}')
+        if not all(math.isfinite(w) for w in self.weights):
+            raise ValueError(f'MatcherConfig.weights must be finite, got {self.weights!r}')

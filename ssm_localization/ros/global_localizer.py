@@ -146,11 +146,18 @@ class GlobalLocalizerNode(LifecycleNode):
         self._localize_lock = threading.Lock()   # one localization at a time
         self._state_lock = threading.Lock()      # guards the fields below
         self._last: Localization | None = None   # the last localization (diagnostics)
+        self._last_checksum = ''                  # of the map it was made on
         self._index_marks: list = []
         self._marks_frame = ''
         self._early_prior: PoseWithCovarianceStamped | None = None   # initialpose before track
         self._last_markers = 0.0
         self._configured_parts = False
+        # what on_configure creates (None until then, and again after cleanup)
+        self._laser = self.handover = self.source = self._queue = None
+        self._map_sub = self._scan_sub = None
+        self.pose_pub = self.initialpose_pub = self.candidates_pub = None
+        self.marker_pub = self.diagnostics_pub = None
+        self._pending_prior: PoseWithCovarianceStamped | None = None   # until a map frame
         self._workers: list[threading.Thread] = []
         self._track_subs: list = []
         self.session: TrackSession | None = None
@@ -179,11 +186,18 @@ class GlobalLocalizerNode(LifecycleNode):
         if self._destroying:
             return FAILURE
         values = self._guard.values()
+        try:
+            return self._configure_parts(values)
+        except Exception:
+            self._release_parts()     # what was created before the failure, nothing left behind
+            raise
+
+    def _configure_parts(self, values: dict[str, Any]) -> TransitionCallbackReturn:
         configs = node_configs(values)
         self._serve_nav2_service(bool(values['serve_reinitialize_global_localization']))
         self.mode = str(values['mode'])
         self.base_frame = str(values['base_frame']).lstrip('/')
-        self.map_frame_param = str(values['map_frame'])
+        self.map_frame_param = str(values['map_frame']).lstrip('/')
         self.laser_pose = laser_pose_of(values)
         self.index_config, self.localizer_config = configs.index, configs.localizer
         self.rate = float(values['rate'])
@@ -301,20 +315,29 @@ class GlobalLocalizerNode(LifecycleNode):
         if not self._configured_parts:
             return
         self._configured_parts = False
-        self._queue.stop(f'not localized: global_localizer {why}')
-        self.source.stop()
-        self._laser.close()
-        self.handover.close()
-        self.destroy_subscription(self._map_sub)
-        self.destroy_subscription(self._scan_sub)
-        for sub in self._track_subs:
-            self.destroy_subscription(sub)
-        self._track_subs, self.session = [], None
+        self._release_parts(why)
+
+    def _release_parts(self, why: str = 'configure failed') -> None:
+        """Stop and destroy every part ``on_configure`` created (those that exist)."""
+        if self._queue is not None:
+            self._queue.stop(f'not localized: global_localizer {why}')
+        for part in (self.source, self._laser, self.handover):
+            if part is not None:
+                (part.stop if part is self.source else part.close)()
+        for sub in (self._map_sub, self._scan_sub, *self._track_subs):
+            if sub is not None:
+                self.destroy_subscription(sub)
         for pub in (self.pose_pub, self.initialpose_pub, self.candidates_pub, self.marker_pub,
                     self.diagnostics_pub):
-            self.destroy_lifecycle_publisher(pub)
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+        self._laser = self.handover = self.source = self._queue = None
+        self._map_sub = self._scan_sub = None
+        self.pose_pub = self.initialpose_pub = self.candidates_pub = None
+        self.marker_pub = self.diagnostics_pub = None
+        self._track_subs, self.session = [], None
         with self._state_lock:
-            self._last, self._index_marks = None, []
+            self._last, self._index_marks, self._pending_prior = None, [], None
 
     def _start_worker(self, target: Callable[[], None], name: str) -> None:
         worker = threading.Thread(target=target, name=name, daemon=True)
@@ -360,9 +383,16 @@ class GlobalLocalizerNode(LifecycleNode):
                                    'of track mode')
 
     def _take_prior(self, msg: PoseWithCovarianceStamped) -> None:
+        served = self.source.served
+        if served is None and not self.map_frame_param:
+            # the map's frame is not known before its index is served: judged then
+            with self._state_lock:
+                self._pending_prior = msg
+            self.get_logger().info("initialpose kept: its frame is checked against the map's "
+                                   'once the map is indexed')
+            return
         try:
-            self.get_logger().info(self.session.prior_from_msg(msg,
-                                                               self._frame(self.source.served)))
+            self.get_logger().info(self.session.prior_from_msg(msg, self._frame(served)))
         except ValueError as exc:
             self.get_logger().warning(f'initialpose ignored: {exc}')
 
@@ -373,17 +403,31 @@ class GlobalLocalizerNode(LifecycleNode):
             self.source.on_map(occ)
 
     def _on_served(self, served: ServedIndex) -> None:
-        """IndexSource: a new index (or frame) is served: its markers."""
+        """
+        IndexSource: a new index (or frame) is served: its markers.
+
+        A different map ends the last answer: it is no longer reported (``/diagnostics``) and
+        the candidates are cleared; the latched ``global_pose`` keeps its stamp. A prior that
+        waited for the map's frame is taken now.
+        """
         frame = self._frame(served)
         stamp = self._now_ns()
         marks = markers.index_markers(served.index, frame, stamp, self.max_gvd_points)
         with self._state_lock:
+            new_map = self._last is not None and self._last_checksum != served.checksum
             self._index_marks, self._marks_frame = marks, frame
+            if new_map:
+                self._last = None
+            pending, self._pending_prior = self._pending_prior, None
         if self._active and self.get_parameter('publish_markers').value:
             self.marker_pub.publish(markers.marker_array(marks, frame, stamp))
+        if new_map and self._active:
+            self.candidates_pub.publish(pose_array([], stamp, frame))
+        if pending is not None and self.session is not None:
+            self._take_prior(pending)
 
     def _frame(self, served: ServedIndex | None) -> str:
-        return self.map_frame_param or (served.frame if served else '') or 'map'
+        return self.map_frame_param or (served.frame.lstrip('/') if served else '') or 'map'
 
     def map_state(self) -> MapState:
         """Return the index source's state; ``WAITING`` (not configured) before configure."""
@@ -487,7 +531,7 @@ class GlobalLocalizerNode(LifecycleNode):
         frame = self._frame(scan.served)
         stamp = scan.msg.header.stamp
         with self._state_lock:
-            self._last = loc
+            self._last, self._last_checksum = loc, scan.served.checksum
             index_marks = self._index_marks
         top_n = self.localizer_config.top_n
         self.candidates_pub.publish(pose_array(

@@ -5,9 +5,11 @@ Every parameter is declared with a :class:`ParameterDescriptor` that carries its
 refuses out-of-range values, NaN and infinities included, at start-up and at run time) and an
 on-set-parameters callback, :class:`ParameterGuard`, that refuses with a reason what a range
 cannot express: non-finite floats in lists, a value outside a set of choices, an empty frame
-name, a config the core would reject, and a change of a configure-time parameter while the node
-is configured. At start-up a refused value makes the declaration raise (the node exits with the
-reason, status 2); at run time ``ros2 param set`` gets the reason and the node keeps its value.
+name, a topic name ROS would refuse or a frame id with white space (refused when set, not at
+configure), a config the core would reject, and a change of a configure-time parameter while
+the node is configured. At start-up a refused value makes the declaration raise (the node exits
+with the reason, status 2); at run time ``ros2 param set`` gets the reason and the node keeps its
+value.
 
 Two kinds of parameters:
 
@@ -18,13 +20,16 @@ Two kinds of parameters:
 """
 from __future__ import annotations
 
+import array
 import math
 from typing import Any, Callable, Iterable
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.validate_topic_name import validate_topic_name
 
 INTEGER_MAX = 2 ** 62
 # (low, high) of the nodes' own numeric parameters; integer parameters without an entry get
@@ -44,6 +49,11 @@ RANGES: dict[str, tuple[float, float]] = {
     'handover_tolerance': (0.0, 1000.0),
 }
 NON_EMPTY = ('base_frame', 'odom_frame', 'scan_topic', 'map_topic')
+#: names the node subscribes to: a valid ROS topic name (relative, absolute or private), or empty
+#: where the parameter allows it (``handover_confirm_topic``: no confirmation)
+TOPICS = ('scan_topic', 'map_topic', 'handover_confirm_topic')
+#: frame ids: no white space (a leading ``/`` is dropped, as tf2 does not take it)
+FRAMES = ('base_frame', 'odom_frame', 'map_frame')
 
 
 def descriptor(name: str, default: Any, description: str, dynamic: bool,
@@ -69,21 +79,33 @@ def descriptor(name: str, default: Any, description: str, dynamic: bool,
         notes.append('one of ' + ', '.join(choices))
     if name in NON_EMPTY:
         notes.append('not empty')
+    if name in TOPICS:
+        notes.append('a valid topic name')
+    if name in FRAMES:
+        notes.append('no white space')
     d.additional_constraints = '; '.join(notes)
     return d
 
 
 def value_problem(name: str, value: Any, choices: Iterable[str] = ()) -> str | None:
     """Why ``value`` is not acceptable for ``name`` (beyond its descriptor range), or None."""
-    values = value if isinstance(value, (list, tuple)) else [value]
+    # a list set over the set_parameters service arrives as an array.array
+    values = list(value) if isinstance(value, (list, tuple, array.array)) else [value]
     for v in values:
         if isinstance(v, float) and not math.isfinite(v):
-            return f'{name} must be finite, got {value!r}'
+            return f'{name} must be finite, got {values!r}'
     choices = tuple(choices)
     if choices and value not in choices:
         return f'{name} must be one of {", ".join(choices)}; got {value!r}'
     if name in NON_EMPTY and not str(value).strip():
         return f'{name} must not be empty'
+    if name in TOPICS and str(value):
+        try:
+            validate_topic_name(str(value))
+        except InvalidTopicNameException as exc:
+            return f'{name}: {str(exc).splitlines()[0]} ({str(value)!r})'
+    if name in FRAMES and any(c.isspace() for c in str(value)):
+        return f'{name} must not contain white space, got {str(value)!r}'
     return None
 
 

@@ -209,7 +209,11 @@ def test_initialpose_before_configure_is_the_track_prior(ros, world, capfd):
     change = ros.node.create_client(ChangeState, 'global_localizer/change_state')
     assert ros.call(change, ChangeState.Request(
         transition=Transition(id=Transition.TRANSITION_CONFIGURE))).success
-    assert rig.node.session.waiting_prior, 'kept for the track, waiting for the map'
+    # kept for the track; its frame is judged against the map's once the map is indexed
+    assert rig.node._pending_prior is not None and not rig.node.session.waiting_prior
+    rig.map_pub.publish(occupancy_grid_from_map(occ))
+    assert rig.wait_ready()
+    assert ros.wait_for(lambda: rig.node.session.waiting_prior, 5.0)
     err = capfd.readouterr().err
     assert 'initialpose received before configure: kept' in err
     assert f'track: prior from initialpose x={sim.poses[0][0]:.3f}' in err

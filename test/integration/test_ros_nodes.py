@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 import time
 
-from geometry_msgs.msg import PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from helpers import close_pose, find_bag, LocalizerRig, ros_params, synthetic_map
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
@@ -295,9 +295,14 @@ def test_localizer_survives_bad_maps_and_reindexes_new_map(ros, capfd):
     time.sleep(0.3)
     assert loc.served() is first_localizer and not loc.busy()
     changed = synthetic_map(2)
+    candidates = ros.collect(PoseArray, 'candidates', LATCHED_QOS)
+    assert loc.node._last is not None
     loc.publish_map(changed)
     assert ros.wait_for(lambda: loc.served() is not first_localizer, 120)
     assert loc.wait_ready()
+    # the answer on the old map is not reported on the new one; its candidates are cleared
+    assert loc.node._last is None
+    assert ros.wait_for(lambda: any(len(m.poses) == 0 for m in list(candidates)), 5)
     sim2 = _simulated(changed, count=1, seed=5)
     res = loc.relocalize(laser_scan_from_record(sim2.scans[0]))
     assert res.success, res.message

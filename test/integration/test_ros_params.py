@@ -140,3 +140,63 @@ def test_bad_parameter_value_is_refused(ros_domain):
     from ssm_localization.ros.global_localizer import GlobalLocalizerNode
     with pytest.raises(ParameterException, match='mode must be one of on_demand, continuous'):
         _make(GlobalLocalizerNode, ['--ros-args', '-p', 'mode:=sideways'])
+
+
+def test_topic_and_frame_names_are_checked_when_set(ros_domain):
+    """A topic ROS would refuse, or a frame with white space: refused at once, with the reason."""
+    from rclpy.parameter import Parameter
+    from ssm_localization.ros.global_localizer import GlobalLocalizerNode
+    with pytest.raises(ParameterException, match='scan_topic: Invalid topic name'):
+        _make(GlobalLocalizerNode, ['--ros-args', '-p', 'scan_topic:=bad topic'])
+    ctx, node = _make(GlobalLocalizerNode, ['--ros-args', '-p', 'autostart:=false'])
+    try:
+        for name, value, why in (('map_topic', '1map', 'must not start with a number'),
+                                 ('handover_confirm_topic', 'a b', 'Invalid topic name'),
+                                 ('base_frame', 'bad frame', 'must not contain white space')):
+            result = node.set_parameters([Parameter(name, value=value)])[0]
+            assert not result.successful and why in result.reason, (name, result.reason)
+        for name, value in (('scan_topic', '~/scan'), ('handover_confirm_topic', ''),
+                            ('map_frame', '/map')):
+            assert node.set_parameters([Parameter(name, value=value)])[0].successful, name
+    finally:
+        _close(ctx, node)
+
+
+def test_a_list_from_the_set_parameters_service_is_checked_for_nan():
+    """Over the service a double array arrives as an array.array, not a list: still checked."""
+    import array
+    from ssm_localization.ros.parameter_guard import value_problem
+    assert 'must be finite' in value_problem('index.matcher.weights',
+                                             array.array('d', [float('nan'), 1.0, 1.0]))
+    assert value_problem('index.matcher.weights', array.array('d', [1.0, 1.0, 1.0])) is None
+
+
+def test_a_failed_configure_leaves_nothing_behind(ros_domain, monkeypatch):
+    """Whatever configure created before it failed is destroyed: publishers, threads, ..."""
+    import threading
+    from ssm_localization.ros.global_localizer import GlobalLocalizerNode
+    ctx, node = _make(GlobalLocalizerNode, ['--ros-args', '-p', 'autostart:=false',
+                                            '-p', 'map_frame:=/map'])
+    try:
+        def counts():
+            return (len(list(node.publishers)), len(list(node.subscriptions)),
+                    len(list(node.timers)), threading.active_count())
+        before = counts()
+        real = node.create_subscription
+
+        def failing(msg_type, topic, *args, **kwargs):
+            if topic == 'scan':
+                raise RuntimeError('no subscription today')
+            return real(msg_type, topic, *args, **kwargs)
+
+        monkeypatch.setattr(node, 'create_subscription', failing)
+        for _ in range(3):
+            assert node.trigger_configure() == TransitionCallbackReturn.FAILURE
+            assert counts() == before
+        monkeypatch.setattr(node, 'create_subscription', real)
+        assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+        assert node._frame(None) == 'map'              # a leading slash is dropped
+        assert node.trigger_cleanup() == TransitionCallbackReturn.SUCCESS
+        assert counts() == before
+    finally:
+        _close(ctx, node)

@@ -206,6 +206,26 @@ def test_a_new_map_frame_does_not_restart_the_track(ros, bag, capfd):
     assert 'laser mount changed' not in capfd.readouterr().err
 
 
+def test_a_prior_before_the_map_is_judged_in_the_maps_frame(ros, bag):
+    """An initialpose that comes before the map is checked against the map's own frame."""
+    grid, _, _, truth, _ = bag
+    world = copy.deepcopy(grid)
+    world.header.frame_id = 'world'
+    for frame, taken in (('world', True), ('map', False)):
+        node = TrackingNode(ros)
+        prior = PoseWithCovarianceStamped()
+        prior.header.frame_id = frame
+        prior.pose.pose = pose_msg(truth[10])
+        prior.pose.covariance = covariance6(np.diag([0.09, 0.09, 0.02]))
+        node.prior_pub.publish(prior)
+        assert ros.wait_for(lambda: node.node._pending_prior is not None, 5.0), frame
+        assert not node.node.session.waiting_prior
+        assert node.ready(world)
+        assert ros.wait_for(lambda: node.node._pending_prior is None, 5.0)
+        assert node.node.session.waiting_prior is taken, frame
+        ros.remove(node.node)
+
+
 def test_track_mode_parameters_are_checked(ros):
     from ssm_localization.ros.global_localizer import GlobalLocalizerNode
     with pytest.raises(Exception, match='tracker'):

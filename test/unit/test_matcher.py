@@ -43,6 +43,12 @@ def test_config_validation():
         MatcherConfig(weights=(1.0, 2.0))
     with pytest.raises(ValueError):
         MatcherConfig(tangent_method='spline')
+    for field, value, why in (('min_spacing', -1.0, '> 0'), ('icp_max_dist', float('nan'), '> 0'),
+                              ('length_cap', -0.1, '>= 0'), ('ransac_iterations', 0, '>= 1'),
+                              ('weights', (float('inf'), 1.0, 1.0), 'finite')):
+        with pytest.raises(ValueError, match=f'MatcherConfig.{field} must .*{why}'):
+            MatcherConfig(**{field: value})
+    assert MatcherConfig(length_cap=0.0, retries=0, icp_min_spacing=0.0).retries == 0
     with pytest.raises(Exception):
         MatcherConfig().max_points = 5      # frozen
 
