@@ -31,6 +31,7 @@ from typing import Any, Callable, NamedTuple
 
 from ssm_localization.config import IndexConfig, LocalizerConfig
 from ssm_localization.config.convert import flatten
+from ssm_localization.files.reading import clip
 from ssm_localization.localization.confidence import resolution_warning
 from ssm_localization.localization.localizer import GlobalLocalizer
 from ssm_localization.mapping.index import build_index, load_index, MapIndex, save_index
@@ -193,6 +194,7 @@ class IndexSource:
         self._latest: TopicMap | None = None     # the newest usable map seen on the topic
         self._loading = False                    # index_file is being read
         self._write_to: Path | None = None       # write the next index built from the topic
+        self._stale = ''                         # why the served index is not the topic's map
 
     # ------------------------------------------------------------------ state
     @property
@@ -213,13 +215,14 @@ class IndexSource:
     def map_state(self) -> MapState:
         """Return the phase and what it is about."""
         with self._lock:
-            loading, served = self._loading, self._served
+            loading, served, stale = self._loading, self._served, self._stale
         if loading:
             return MapState(IndexPhase.LOADING, self._builder.status())
         if self._builder.busy:
             return MapState(IndexPhase.INDEXING, self._builder.status())
         if served is not None:
-            return MapState(IndexPhase.READY, served.source)
+            return MapState(IndexPhase.READY, f'{served.source}; {stale}' if stale
+                            else served.source)
         return MapState(IndexPhase.WAITING, f'waiting for a map on {self._topic}')
 
     def stop(self) -> None:
@@ -333,6 +336,9 @@ class IndexSource:
         if job.key[0] is JobKind.INDEX_MAP:
             with self._lock:
                 keeping = self._served is not None
+                if keeping:      # said in map_state (/diagnostics) until a map is served
+                    self._stale = (f'the newer {job.label} failed to index ({clip(reason)}): '
+                                   'serving the previous map')
             self._log.warning(f'{job.label}: indexing failed ({reason}); '
                               + ('keeping the previous index' if keeping else 'still no index'))
             return
@@ -350,7 +356,7 @@ class IndexSource:
         served = ServedIndex(index, self._work.localizer(index), index.map_checksum, source,
                              frame)
         with self._lock:
-            self._served = served
+            self._served, self._stale = served, ''
             write_to = None if served.from_file else self._write_to
             if write_to is not None:
                 self._write_to = None

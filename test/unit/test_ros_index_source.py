@@ -238,6 +238,30 @@ def test_same_map_again_and_frame_change(harness_factory):
     assert any("moved from frame 'map' to 'map2'" in w for w in h.log.warnings())
 
 
+def test_a_newer_map_that_fails_to_index_is_said_while_the_previous_one_serves(
+        harness_factory):
+    h = harness_factory(None)
+    h.source.on_map(FakeMap('G'))
+    h.settle()
+    build = h.work.build
+
+    def failing(occ, progress):
+        if occ.cells == 'BAD':
+            raise ValueError('map has no nodes')
+        return build(occ, progress)
+
+    object.__setattr__(h.work, 'build', failing)
+    h.source.on_map(FakeMap('BAD'))
+    h.settle()
+    state = h.source.map_state()
+    assert state.phase is IndexPhase.READY and h.source.served.index.map.cells == 'G'
+    assert 'failed to index (ValueError: map has no nodes): serving the previous map' in \
+        state.detail, state.detail
+    h.source.on_map(FakeMap('H'))
+    h.settle()
+    assert h.source.map_state() == MapState(IndexPhase.READY, h.ready[-1].source)
+
+
 def test_no_index_file_no_map(harness_factory, tmp_path):
     h = harness_factory(None)
     h.source._path = None
