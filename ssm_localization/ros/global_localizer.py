@@ -321,9 +321,11 @@ class GlobalLocalizerNode(LifecycleNode):
         """Stop and destroy every part ``on_configure`` created (those that exist)."""
         if self._queue is not None:
             self._queue.stop(f'not localized: global_localizer {why}')
-        for part in (self.source, self._laser, self.handover):
+        if self.source is not None:
+            self.source.stop()
+        for part in (self._laser, self.handover):
             if part is not None:
-                (part.stop if part is self.source else part.close)()
+                part.close()
         for sub in (self._map_sub, self._scan_sub, *self._track_subs):
             if sub is not None:
                 self.destroy_subscription(sub)
