@@ -240,7 +240,7 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
         topics = {scan_topic, GT_TOPIC, ODOM_TOPIC} | ({MAP_TOPIC} if read_map else set())
         total = sum(rd.counts.get(t, 0) for t in topics)
         occ_map, scans, gt, od = None, [], {}, {}
-        skipped: dict[str, list[str]] = {}
+        skipped: dict[str, tuple[int, str]] = {}     # topic: (count, the first reason)
         for n, (topic, msg) in enumerate(rd.messages(topics), 1):
             if topic == scan_topic:
                 scans.append(_scan_record(msg))
@@ -252,13 +252,14 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
             elif topic in (GT_TOPIC, ODOM_TOPIC):
                 pose = _pose_of(msg.pose if topic == GT_TOPIC else msg.pose.pose)
                 if isinstance(pose, str):
-                    skipped.setdefault(topic, []).append(pose)
+                    count, first = skipped.get(topic, (0, pose))
+                    skipped[topic] = (count + 1, first)
                 else:
                     (gt if topic == GT_TOPIC else od)[_stamp_of(msg.header)] = pose
             _progress_step(progress, n, total)
-        for topic, reasons in skipped.items():
-            warnings.warn(f'{rd.path}: {topic}: {len(reasons)} message(s) with no valid pose '
-                          f'skipped (the first: {reasons[0]})', RuntimeWarning, stacklevel=2)
+        for topic, (count, first) in skipped.items():
+            warnings.warn(f'{rd.path}: {topic}: {count} message(s) with no valid pose skipped '
+                          f'(the first: {first})', RuntimeWarning, stacklevel=2)
         return BagData(map=occ_map, scans=scans, ground_truth=gt, odom=od,
                        topic_counts=dict(rd.counts))
     finally:
