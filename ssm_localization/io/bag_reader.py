@@ -223,8 +223,8 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
     Read a whole bag: the first /map, every scan, the /ground_truth and /odom poses.
 
     ``read_map=False`` skips /map (for a caller with a map of its own). The map's resolution and
-    origin are the shortest decimals of their float32 values (``occupancy.canonical``), so it
-    checksums like the YAML it was made from.
+    origin yaw are the shortest decimals of their float32 values (``occupancy.canonical``), so
+    it checksums like the YAML it was made from.
 
     Raises ``FileNotFoundError`` for a missing path, ``BagError`` (a ``ValueError``) for a bag
     that cannot be opened or lacks ``scan_topic`` (unless ``require_scans=False``),
