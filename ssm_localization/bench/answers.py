@@ -22,6 +22,7 @@ import re
 
 from ..config.confidence import CONFIDENCE_MODEL
 from ..evaluation.replay import ResultRow
+from ..files.writing import atomic_files
 from ..localization.confidence import feature_values
 from ..localization.localizer import Localization, OK
 from ..transforms import Pose2
@@ -82,10 +83,10 @@ class AnswerLog:
         self.rows.append(row)
 
     def write(self, path: str | Path) -> Path:
-        """Write the rows as CSV to ``path`` (folders made); return it."""
+        """Write the rows as CSV to ``path`` (folders made, all or nothing); return it."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open('w', newline='') as f:
+        with atomic_files(path, what='answers file') as (tmp,), \
+                open(tmp, 'w', newline='') as f:
             writer = csv.DictWriter(f, fieldnames=COLUMNS, restval='')
             writer.writeheader()
             writer.writerows(self.rows)

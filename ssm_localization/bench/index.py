@@ -32,6 +32,7 @@ from .campus import campus_map, office_30m
 from .data import data_dir, DATA_HELP
 from .memory import format_layers, LayerMeter
 from .synthetic import office_map
+from ..cli.arguments import positive_int
 from ..io.carmen import build_map, read_carmen_log
 from ..localization.localizer import GlobalLocalizer
 from ..mapping.index import build_index
@@ -47,7 +48,7 @@ SYNTHETIC = {'office': office_map, 'office_30m': office_30m}
 
 
 def _load(spec: str) -> OccupancyMap:
-    if spec in SYNTHETIC:
+    if spec in SYNTHETIC and not Path(spec).is_file():     # a file of that name is the file
         return SYNTHETIC[spec]()
     if spec.startswith('campus:'):
         _, data, work = spec.split(':', 2)
@@ -122,7 +123,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='only the campus and the 30 M-cell office')
     parser.add_argument('--no-layers', action='store_true',
                         help='skip the per-layer memory breakdown (a second, traced build)')
-    parser.add_argument('--repeat', type=int, default=1,
+    parser.add_argument('--repeat', type=positive_int, default=1,
                         help='runs per map; the fastest is reported (default 1)')
     parser.add_argument('--data', default=None,
                         help=DATA_HELP + ' (without it, only --extra maps and the office)')

@@ -54,6 +54,7 @@ from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer, FullSearchLocalizer
 from .places import (answers_on, foreign, load_place, MAP_RESOLUTION, MapVariant, real_grid,
                      REAL_PLACES, SIM_PLACES, sim_queries)
+from ..cli.arguments import nonnegative_int, positive_int
 from ..config.params import load_configs
 from ..evaluation.calibration import reliability_report
 from ..evaluation.plotting import plot_reliability, plot_replay
@@ -96,13 +97,13 @@ def split_of(name: str, tuning: frozenset[str] = TUNING_SETS) -> str:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--sets', nargs='+', default=DEFAULT_SETS, choices=ALL_SETS + ['all'])
     parser.add_argument('-n', type=int, default=500, help='queries per simulated set')
-    parser.add_argument('--real-max', type=int, default=0,
+    parser.add_argument('--real-max', type=nonnegative_int, default=0,
                         help='at most this many real queries per log (0 = all odd scans)')
     parser.add_argument('--quick', action='store_true', help='-n 60 and --real-max 60')
     parser.add_argument('--campus', action='store_true',
                         help='also the campus-scale sets: campus (six real buildings and three '
                              'simulated maps on one 27.6 M-cell grid) and office_30m')
-    parser.add_argument('--campus-n', type=int, default=100,
+    parser.add_argument('--campus-n', type=positive_int, default=100,
                         help='queries per building of the campus set (default 100)')
     parser.add_argument('--campus-bags', metavar='DIR',
                         help='with the campus-scale sets: also write their queries as bags '
@@ -113,7 +114,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='also run the exhaustive correlative search on the same queries, '
                              "with its own verdict (peer) and with this package's (peer-v); "
                              'with --foreign: on the foreign scans too, and print their ok rates')
-    parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--seed', type=nonnegative_int, default=1)
     parser.add_argument('--data', default=None, help=DATA_HELP)
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
     parser.add_argument('--params', help='params YAML applied to every set')
@@ -126,7 +127,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'place (--foreign-places), --foreign-n a pair; prints the ok rate')
     places = list(REAL_PLACES) + list(SIM_PLACES)
     parser.add_argument('--foreign-places', nargs='+', default=places, choices=places)
-    parser.add_argument('--foreign-n', type=int, default=40, help='scans per ordered foreign pair')
+    parser.add_argument('--foreign-n', type=positive_int, default=40,
+                        help='scans per ordered foreign pair')
     parser.add_argument('--reliability', metavar='PNG',
                         help='write the reliability diagram (reported confidence vs observed '
                              'precision, per split) of every answer of the run')

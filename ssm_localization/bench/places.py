@@ -12,6 +12,7 @@ Each can be taken through an everyday sensor first (``io/sensors.py``).
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -73,10 +74,13 @@ def real_map(data: Path, work: Path, name: str, resolution: float = MAP_RESOLUTI
 def real_grid(data: Path, work: Path, name: str, log: CarmenLog | None = None,
               resolution: float = MAP_RESOLUTION):
     """Return the map of :func:`real_map`; the log is read only to build a map not cached yet."""
+    # the cell size in the name to the micrometre (49.6 mm and 50.4 mm are two maps)
     map_yaml = work / (f'{name}_even.yaml' if resolution == MAP_RESOLUTION
-                       else f'{name}_even_{resolution * 1000:.0f}mm.yaml')
+                       else f'{name}_even_{round(resolution * 1000, 3):g}mm.yaml')
     if map_yaml.exists():
-        return load_map_yaml(map_yaml)
+        cached = load_map_yaml(map_yaml)
+        if math.isclose(cached.resolution, resolution, rel_tol=1e-6):
+            return cached
     if log is None:
         log = read_carmen_log(data / 'carmen' / f'{name}-corrected.log.gz')
     grid = build_map(log, indices=range(0, len(log), 2),

@@ -39,6 +39,7 @@ from tqdm import tqdm
 from .data import data_dir, DATA_HELP
 from .localize import REAL_SETS, split_of
 from .places import MAP_RESOLUTION, real_map
+from ..cli.arguments import nonnegative_float, nonnegative_int
 from ..config.params import load_all_configs
 from ..evaluation.calibration import reliability_report
 from ..evaluation.plotting import plot_reliability, plot_track
@@ -54,6 +55,8 @@ from ..mapping.index import build_index
 TARGET_SUCCESS = 0.98
 TARGET_PRECISION = 0.999
 TARGET_FIX_SCANS = 3
+#: draws of a random kidnap's two scans before a log is said to have no two 1 m apart
+MAX_KIDNAP_DRAWS = 10_000
 TARGET_P50_MS = 30.0
 TARGET_P95_MS = 100.0
 #: the logs the tracker's defaults were chosen on (odometry noise fitted on ACES, decisions on
@@ -65,7 +68,7 @@ TUNING_SETS = frozenset({'intel', 'aces', 'fhw'})
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--sets', nargs='+', default=list(REAL_SETS),
                         choices=list(REAL_SETS) + ['all'])
-    parser.add_argument('--scans', type=int, default=0,
+    parser.add_argument('--scans', type=nonnegative_int, default=0,
                         help='use the first N odd-numbered scans of each log (0 = all)')
     parser.add_argument('--quick', action='store_true', help='--scans 200')
     parser.add_argument('--single', action='store_true',
@@ -73,12 +76,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              'localization) and compare')
     parser.add_argument('--no-odom', action='store_true',
                         help='also track the real sequence without odometry')
-    parser.add_argument('--max-range', type=float, default=0.0, metavar='R',
+    parser.add_argument('--max-range', type=nonnegative_float, default=0.0, metavar='R',
                         help='also track the real sequence and its two-kidnap sequence with the '
                         'laser limited to R metres')
-    parser.add_argument('--random-kidnaps', type=int, default=0, metavar='N',
+    parser.add_argument('--random-kidnaps', type=nonnegative_int, default=0, metavar='N',
                         help='also N random kidnaps per log (wrong ok after them, recovery)')
-    parser.add_argument('--seed', type=int, default=1, help='seed of the random kidnaps')
+    parser.add_argument('--seed', type=nonnegative_int, default=1,
+                        help='seed of the random kidnaps')
     parser.add_argument('--data', default=None, help=DATA_HELP)
     parser.add_argument('--work', default='bench_data', help='where generated maps are cached')
     parser.add_argument('--map-resolution', type=float, default=MAP_RESOLUTION, metavar='M',
@@ -135,11 +139,18 @@ def random_kidnaps(localizer: GlobalLocalizer, config, seq: ScanSequence, count:
     rng = np.random.default_rng(seed)
     truth = np.array(seq.truth)
     wrong, recoveries = 0, []
+    lo, hi = KIDNAP_BEFORE - 1, len(seq) - KIDNAP_AFTER
+    if hi - lo < 2:
+        raise ValueError(f'{seq.name}: {len(seq)} scans are too few for random kidnaps (at '
+                         f'least {KIDNAP_BEFORE + KIDNAP_AFTER + 1}: use more --scans)')
     for _ in tqdm(range(count), desc=f'{seq.name} kidnaps', leave=False):
-        while True:
-            i, j = (int(v) for v in rng.integers(KIDNAP_BEFORE - 1, len(seq) - KIDNAP_AFTER, 2))
+        for _draw in range(MAX_KIDNAP_DRAWS):
+            i, j = (int(v) for v in rng.integers(lo, hi, 2))
             if np.hypot(*(truth[i, :2] - truth[j, :2])) >= 1.0:
                 break
+        else:
+            raise ValueError(f'{seq.name}: no two of its {len(seq)} scans 1 m apart found in '
+                             f'{MAX_KIDNAP_DRAWS} draws for a random kidnap: use more --scans')
         _, ts, _ = _track(localizer, config, splice_kidnaps(seq, [(i, j)]))
         wrong += ts.recoveries[0].wrong_ok
         recoveries.append(ts.recoveries[0].scans)

@@ -6,8 +6,9 @@ Each subcommand module exposes ``add_arguments(parser)`` and ``run(args) -> int`
 
 User errors end in one line on stderr, ``ssm_localization COMMAND: error: ...``, and exit
 status 2: bad arguments (argparse), and the ``ValueError`` / ``OSError`` (missing, unreadable
-or unwritable files) that the library raises at its boundaries, naming the file or field.
-Subcommands check their output paths before they start working.
+or unwritable files) that the library raises at its boundaries, naming the file or field, and
+a ``MemoryError`` (settings asking for more memory than there is). Subcommands check their
+output paths before they start working.
 """
 from __future__ import annotations
 
@@ -74,6 +75,10 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except (OSError, ValueError) as exc:  # user errors: one clear line, no traceback
         print(f'ssm_localization {args.command}: error: {error_text(exc)}', file=sys.stderr)
+        return 2
+    except MemoryError as exc:            # settings that ask for more than the machine has
+        print(f'ssm_localization {args.command}: error: out of memory '
+              f'({error_text(exc)}): ask for fewer beams, scans or cells', file=sys.stderr)
         return 2
 
 

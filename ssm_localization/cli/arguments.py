@@ -11,6 +11,7 @@ import math
 from typing import Callable
 
 from ..mapping.map_limits import MAX_MAP_CELLS
+from ..matching.scan import MAX_RANGE
 
 
 def _number(kind: type, test: Callable[[float], bool], want: str) -> Callable[[str], float]:
@@ -32,6 +33,12 @@ nonnegative_float = _number(float, lambda v: v >= 0, 'a number >= 0')
 fraction = _number(float, lambda v: 0 <= v <= 1, 'a number in [0, 1]')
 positive_int = _number(int, lambda v: v >= 1, 'an integer >= 1')
 nonnegative_int = _number(int, lambda v: v >= 0, 'an integer >= 0')
+#: a sensor range, metres (readings beyond MAX_RANGE are garbage to the localizer)
+sensor_range = _number(float, lambda v: 0 < v <= MAX_RANGE, f'a range in (0, {MAX_RANGE:g}] m')
+#: a pose offset's component: metres, or degrees where the option says so
+offset_component = _number(float, lambda v: abs(v) <= 1000.0, 'a number within +-1000')
+#: a wait, seconds
+delay_seconds = _number(float, lambda v: 0 <= v <= 3600.0, 'seconds in [0, 3600]')
 
 
 def add_max_map_cells(parser: argparse.ArgumentParser) -> None:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 import time
 
 from .arguments import add_max_map_cells
@@ -24,9 +25,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output_file(args.output, 'index file')
+    inputs = (args.map, args.params)
+    check_output_file(args.output, 'index file', inputs)
+    if Path(args.output).suffix != '.npz':
+        raise ValueError(f'index file {args.output}: expected a name ending in .npz')
     if args.plot:
-        check_plot_path(args.plot)
+        check_plot_path(args.plot, inputs)
     config = load_index_config(args.params) if args.params else None
     occ_map = load_map_yaml(args.map, max_cells=args.max_map_cells)
     t0 = time.perf_counter()

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from .arguments import finite_float, nonnegative_int, positive_int
+from .arguments import nonnegative_int, offset_component, positive_int
 from ..config.matcher import MatcherConfig
 from ..evaluation.plotting import check_plot_path, plot_match
 from ..io.carmen import read_carmen_log
@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--k', type=nonnegative_int, default=0,
                         help='reference scan index (default 0)')
     parser.add_argument('--s', type=int, default=1, help='new scan = k + s (default 1)')
-    parser.add_argument('--offset', type=finite_float, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
+    parser.add_argument('--offset', type=offset_component, nargs=3, metavar=('X', 'Y', 'YAW_DEG'),
                         default=None, help='extra rigid offset applied to the new scan')
     parser.add_argument('--max-points', type=positive_int, default=None,
                         help='matcher point budget')

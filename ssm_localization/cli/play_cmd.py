@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from .arguments import nonnegative_float
+from .arguments import delay_seconds, nonnegative_float
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='skip the first S seconds after the first scan')
     parser.add_argument('--duration', type=nonnegative_float, default=0.0, metavar='S',
                         help='play only S seconds of bag time (0 = to the end)')
-    parser.add_argument('--delay', type=nonnegative_float, default=0.5, metavar='S',
+    parser.add_argument('--delay', type=delay_seconds, default=0.5, metavar='S',
                         help='wait S seconds after creating the publishers (discovery)')
     parser.add_argument('--wait-subscribers', type=nonnegative_float, default=0.0, metavar='S',
                         help='wait up to S seconds for a subscriber on every timed topic')

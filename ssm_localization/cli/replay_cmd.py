@@ -56,9 +56,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output_file(args.output, 'results file')
+    inputs = (args.bag, args.map, args.index, args.params)
+    check_output_file(args.output, 'results file', inputs)
     if args.plot:
-        check_plot_path(args.plot)
+        check_plot_path(args.plot, inputs)
     index_cfg, loc_cfg, track_cfg = load_all_configs(args.params)
     index = load_index(args.index, max_cells=args.max_map_cells) if args.index else None
     grid = load_map_yaml(args.map, max_cells=args.max_map_cells) if args.map else None

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from .arguments import (add_max_map_cells, finite_float, fraction, nonnegative_float,
-                        nonnegative_int, positive_float, positive_int)
+from .arguments import (add_max_map_cells, fraction, nonnegative_float, nonnegative_int,
+                        offset_component, positive_float, positive_int, sensor_range)
 from ..config.simulation import SimulationConfig
 from ..files.writing import check_output_dir
 from ..io.simulate import simulate_bag
@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--fov', type=positive_float, default=360.0,
                         help='field of view, degrees, centred forward')
     parser.add_argument('--beams', type=positive_int, default=360, help='beams per scan')
-    parser.add_argument('--max-range', type=positive_float, default=30.0, help='sensor range, m')
+    parser.add_argument('--max-range', type=sensor_range, default=30.0, help='sensor range, m')
     parser.add_argument('--noise', type=nonnegative_float, default=0.01,
                         help='range noise sigma, m')
     parser.add_argument('--clearance', type=nonnegative_float, default=0.3,
@@ -28,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='unmapped discs (r 0.1-0.3 m, 1-4 m away) per scan')
     parser.add_argument('--short-fraction', type=fraction, default=0.0,
                         help='fraction of beams replaced by random short readings')
-    parser.add_argument('--sensor-offset', type=finite_float, nargs=3, default=(0.0, 0.0, 0.0),
+    parser.add_argument('--sensor-offset', type=offset_component, nargs=3, default=(0.0, 0.0, 0.0),
                         metavar=('X', 'Y', 'YAW'), help='laser pose on the base (m, m, rad)')
     parser.add_argument('--seed', type=nonnegative_int, default=0, help='random seed')
     parser.add_argument('--force', action='store_true', help='overwrite an existing bag')

@@ -93,13 +93,27 @@ def _node_params(data: dict, node: str) -> dict:
     Unknown keys of a flat file raise ``ValueError``.
     """
     ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
+    if ros_file:
+        _require_section(data, (node,))
     section = node_section(data, node)
     unknown = sorted(str(k) for k in section
                      if str(k).split('.')[0] not in KNOWN_TOP_LEVEL)
-    if unknown and not ros_file:
-        raise ValueError(f'unknown parameter {echo(unknown[0])} (known: '
-                         f'{", ".join(KNOWN_TOP_LEVEL)})')
+    if ros_file:
+        # the node's own parameters (mode, scan_topic, ...) are scalars; a mapping or a dotted
+        # name is a group of the core's, and an unknown one a misspelling (``localiser:``)
+        unknown = [k for k in unknown if '.' in k or isinstance(section.get(k), dict)]
+    if unknown:
+        raise ValueError(f'unknown parameter {"group " if ros_file else ""}'
+                         f'{echo(unknown[0])} (known: {", ".join(KNOWN_TOP_LEVEL)})')
     return section
+
+
+def _require_section(data: dict, nodes: tuple[str, ...]) -> None:
+    """``ValueError`` unless a ROS params file has a section for one of ``nodes`` (or ``/**``)."""
+    keys = [k for n in nodes for k in (n, '/' + n)] + ['/**', '**']
+    if not any(isinstance(data.get(k), dict) and 'ros__parameters' in data[k] for k in keys):
+        raise ValueError(f'no {" or ".join(nodes)} section with ros__parameters (the file has '
+                         f'{", ".join(echo(k) for k in data)}): a misspelled node name?')
 
 
 class Configs(NamedTuple):
@@ -178,6 +192,8 @@ def load_index_config(path: str | Path) -> IndexConfig:
 def _index_params(data: dict) -> dict:
     """Return a file of :func:`load_index_config` as a node's parameters."""
     ros = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
+    if ros:
+        _require_section(data, ('map_indexer', 'global_localizer'))
     section = node_section(data, 'map_indexer') if ros else data
     if ros and not section:
         section = node_section(data, 'global_localizer')

@@ -7,6 +7,7 @@ path first with :func:`check_plot_path`, before the work that the figure shows.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Iterable
 
 import numpy as np
 
@@ -21,9 +22,9 @@ PLOT_SUFFIXES = ('.png', '.pdf', '.svg', '.svgz', '.jpg', '.jpeg', '.tif', '.tif
                  '.eps', '.ps')
 
 
-def check_plot_path(path: str | Path) -> Path:
-    """``path`` after checking a figure can be written there (``ValueError`` otherwise)."""
-    p = check_output_file(path, 'plot file')
+def check_plot_path(path: str | Path, inputs: Iterable[str | Path | None] = ()) -> Path:
+    """``path`` after checking a figure can be written there, over none of ``inputs``."""
+    p = check_output_file(path, 'plot file', inputs)
     if p.suffix.lower() not in PLOT_SUFFIXES:
         raise ValueError(f'plot file {p}: expected a name ending in {", ".join(PLOT_SUFFIXES)}')
     return p

@@ -15,7 +15,7 @@ from pathlib import Path
 import secrets
 import shutil
 import tempfile
-from typing import Iterator
+from typing import Iterable, Iterator
 
 
 def _existing_ancestor(path: Path) -> Path:
@@ -38,12 +38,15 @@ def _check_parent(path: Path, what: str) -> None:
         raise ValueError(f'{what} {path}: cannot create files in {anc} (permission denied)')
 
 
-def check_output_file(path: str | Path, what: str) -> Path:
+def check_output_file(path: str | Path, what: str,
+                      inputs: Iterable[str | Path | None] = ()) -> Path:
     """
     ``path`` after checking a file can be written there; errors name ``what``.
 
     Refused with ``ValueError``: an existing directory, an existing non-regular file (a device,
-    a FIFO: it would be replaced), a path under a regular file, an unwritable directory.
+    a FIFO: it would be replaced), a path under a regular file, an unwritable directory, and one
+    of the command's ``inputs`` or a file inside an input directory (a bag's ``metadata.yaml``):
+    an output must not overwrite what is read.
     """
     p = Path(path)
     if p.is_dir():
@@ -51,6 +54,13 @@ def check_output_file(path: str | Path, what: str) -> Path:
     if p.exists() and not p.is_file():
         raise ValueError(f'{what} {p}: exists and is not a regular file')
     _check_parent(p, what)
+    target = p.resolve()
+    for source in inputs:
+        if source is None:
+            continue
+        src = Path(source).resolve()
+        if target == src or src in target.parents:
+            raise ValueError(f'{what} {p}: would overwrite the input {source}')
     return p
 
 

@@ -235,7 +235,7 @@ def read_bag(path: str | Path, scan_topic: str = SCAN_TOPIC,
     """
     rd = _Reader(path)
     try:
-        if require_scans:
+        if require_scans or scan_topic in rd.types:     # a scan topic present is LaserScan
             rd.check_topic(scan_topic, SCAN_TYPE)
         topics = {scan_topic, GT_TOPIC, ODOM_TOPIC} | ({MAP_TOPIC} if read_map else set())
         total = sum(rd.counts.get(t, 0) for t in topics)

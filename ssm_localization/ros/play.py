@@ -172,9 +172,12 @@ def play_bag(bag: str | Path, rate: float = 1.0, loop: bool = False,
     data = read_bag(bag, scan_topic=_norm(scan_topic), require_scans=False)
     grid, items = timeline(data, scan_topic, topics, start_offset, duration)
     if grid is None and not items:
-        print(f'{bag}: nothing to play for the selected topics/window')
-        return 1
-    rclpy.init(args=ros_args)
+        raise ValueError(f'{bag}: nothing to play for the selected topics/window')
+    try:
+        rclpy.init(args=ros_args)
+    except Exception as exc:  # noqa: BLE001 - rclpy raises RCLError / UnknownROSArgsError
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f'ROS arguments {" ".join(ros_args or [])}: {first}') from None
     node = None
     try:
         node = BagPlayer(grid, items, scan_topic)

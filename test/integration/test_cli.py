@@ -390,3 +390,20 @@ def test_bench_localize_peer_compares_both_exhaustive_searches(tmp_path, capsys)
         gap = float(line.group(1)) - float(line.group(2))
         assert abs(float(line.group(3)) - gap) < 0.051
         assert (line.group(4) == 'yes') == (gap >= -1.0)
+
+
+def test_out_of_memory_is_one_line_and_status_2(tmp_path, capsys, monkeypatch):
+    """Settings that ask for more memory than there is (index.beams 10^8): no traceback."""
+    from ssm_localization.cli import index_cmd
+
+    def hungry(*args, **kwargs):
+        raise MemoryError('Unable to allocate 92.4 GiB for an array')
+
+    monkeypatch.setattr(index_cmd, 'build_index', hungry)
+    path = tmp_path / 'room.yaml'
+    data = np.zeros((40, 40), np.int8)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    save_map_yaml(OccupancyMap(data, 0.05), path)
+    assert main(['index', str(path), '-o', str(tmp_path / 'i.npz'), '--quiet']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'error: out of memory (Unable to allocate 92.4 GiB' in err[0]

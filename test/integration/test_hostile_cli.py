@@ -290,6 +290,33 @@ CASES: list[Case] = [
          ('bag/metadata.yaml', 'aliases expand')),
     Case('bag: /dev/zero', lambda d: ['replay', '/dev/zero', '-o', 'out/results.csv'],
          ('/dev/zero', 'not a rosbag2 directory')),
+    Case('`-o` naming a file inside the bag (its metadata.yaml)',
+         lambda d: (d / 'bag').mkdir() or ['replay', 'bag', '-o', _write(
+             d, 'bag/metadata.yaml', 'rosbag2_bagfile_information: {}\n')],
+         ('bag/metadata.yaml', 'would overwrite the input')),
+    Case('`index -o` naming the map image',
+         lambda d: ['index', room_map(d), '-o', 'room.pgm', '--quiet'],
+         ('room.pgm', 'expected a name ending in .npz')),
+    Case('ROS params file with the node name misspelled',
+         lambda d: ['replay', 'bag.mcap', '-o', 'out/results.csv', '--params', _write(
+             d, 'params.yaml', 'global_localiser:\n  ros__parameters:\n    localizer:\n'
+             '      min_score: 0.99\n')],
+         ('params.yaml', 'no global_localizer section', 'global_localiser')),
+    Case('ROS params file with a group misspelled',
+         lambda d: ['replay', 'bag.mcap', '-o', 'out/results.csv', '--params', _write(
+             d, 'params.yaml', 'global_localizer:\n  ros__parameters:\n    localiser:\n'
+             '      min_score: 0.99\n')],
+         ('params.yaml', "unknown parameter group 'localiser'")),
+    Case('`bench localize --answers` naming a directory (checked before the benchmark)',
+         lambda d: (d / 'answers').mkdir() or ['bench', 'localize', '--sets', 'depot', '-n',
+                                               '3', '--answers', 'answers'],
+         ('answers file answers', 'is a directory')),
+    Case('`simulate --max-range 1e39`',
+         lambda d: ['simulate', room_map(d), '-o', 'out/bag', '--max-range', '1e39'],
+         ('--max-range', 'a range in (0, 1000] m')),
+    Case('`match --offset 0 0 1e300`',
+         lambda d: ['match', '--offset', '0', '0', '1e300'],
+         ('--offset', 'a number within +-1000')),
     Case('index file of garbage',
          lambda d: ['replay', _write(d, 'bag.mcap', _garbage()), '--index',
                     _write(d, 'index.npz', _garbage()), '-o', 'out/results.csv'],

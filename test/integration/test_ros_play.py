@@ -102,3 +102,14 @@ def test_play_cli_arguments():
         with pytest.raises(SystemExit) as info:
             parser.parse_args(['bags/x', *bad])
         assert info.value.code == 2
+
+
+def test_play_refuses_bad_ros_arguments_and_a_scan_topic_of_another_type(intel):
+    """One clear error each (the command line prints it with status 2), not a traceback."""
+    from ssm_localization import BagError
+    from ssm_localization.ros.play import play_bag
+    bag = find_bag('intel_queries')
+    with pytest.raises(ValueError, match='ROS arguments --ros-args --bogus'):
+        play_bag(bag, ros_args=['--ros-args', '--bogus'], delay=0.0)
+    with pytest.raises(BagError, match='/ground_truth has type'):
+        play_bag(bag, scan_topic='/ground_truth', delay=0.0)

@@ -48,3 +48,30 @@ def test_specks_occupy_the_given_share_of_the_free_cells_the_same_every_time():
 def test_a_variant_out_of_range_is_refused(bad):
     with pytest.raises(ValueError, match='MapVariant'):
         MapVariant(**bad)
+
+
+def test_random_kidnaps_refuse_a_log_too_short_or_too_still():
+    """Too few scans, or none 1 m apart: an error naming the fix, not a loop for ever."""
+    from types import SimpleNamespace
+    from ssm_localization.bench.track import random_kidnaps
+
+    class Seq(SimpleNamespace):
+        def __len__(self):
+            return len(self.truth)
+
+    with pytest.raises(ValueError, match='9 scans are too few for random kidnaps'):
+        random_kidnaps(None, None, Seq(name='short', truth=[(0.0, 0.0, 0.0)] * 9), 1, 0)
+    with pytest.raises(ValueError, match='no two of its 40 scans 1 m apart'):
+        random_kidnaps(None, None, Seq(name='still', truth=[(0.0, 0.0, 0.0)] * 40), 1, 0)
+
+
+def test_cached_real_maps_are_named_by_their_cell_size_to_the_micrometre(tmp_path):
+    """49.6 mm and 50.4 mm are two maps, not one cache file (both once rounded to 50 mm)."""
+    from ssm_localization.bench.places import real_grid
+    from ssm_localization.mapping.map_io import save_map_yaml
+    data = np.zeros((20, 20), np.int8)
+    data[0, :] = 100
+    for res in (0.0496, 0.0504):
+        save_map_yaml(OccupancyMap(data, res), tmp_path / f'hall_even_{res * 1000:g}mm.yaml')
+    for res in (0.0496, 0.0504):
+        assert real_grid(tmp_path, tmp_path, 'hall', resolution=res).resolution == res
