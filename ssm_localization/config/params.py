@@ -90,7 +90,10 @@ def _node_params(data: dict, node: str) -> dict:
     """
     Return the parameters of ``node`` in a loaded params file.
 
-    Unknown keys of a flat file raise ``ValueError``.
+    Unknown keys of a flat file raise ``ValueError``; so do, in a ROS params file, a missing
+    section for ``node`` (a misspelled node name) and an unknown group of the core's
+    parameters (a mapping or a dotted name: ``localiser:``). The node's own scalar parameters
+    (``mode``, ``scan_topic``, ...) are left to the node.
     """
     ros_file = any(isinstance(v, dict) and 'ros__parameters' in v for v in data.values())
     if ros_file:
