@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import math
 
+from ..matching.scan import MAX_ANGLE
+
 #: default limit: 36 M cells (a 300 m x 300 m site at 5 cm); 0 disables the guard
 MAX_MAP_CELLS = 36_000_000
 
@@ -28,7 +30,7 @@ MAX_RESOLUTION = 10.0
 #: float64 resolves 1.5e-8 m at 1e8, a 1e16 origin only 2 m), the yaw within a full turn either
 #: way (beyond it a yaw in degrees, or a field never set)
 MAX_ORIGIN = 1e8
-MAX_ORIGIN_YAW = 2.0 * math.pi + 1e-3
+MAX_ORIGIN_YAW = MAX_ANGLE
 
 
 class MapTooLargeError(ValueError):

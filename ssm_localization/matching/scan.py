@@ -21,8 +21,9 @@ MAX_RANGE = 1000.0
 #: and the cost of the rest (the ray check, the refinement on every endpoint) grows with the
 #: beams. Real 2-D lasers give 360-4000 beams; a 10^6-beam message took 6.9 s and 1.2 GB.
 MAX_BEAMS = 16384
-#: ``angle_min`` beyond a full turn either way is taken for a mistake (degrees for radians, an
-#: unset field): REP 103 angles lie within [-pi, pi] or [0, 2 pi]
+#: a full turn and a little rounding: an ``angle_min`` beyond it either way is taken for a mistake
+#: (degrees for radians, an unset field: REP 103 angles lie within [-pi, pi] or [0, 2 pi]), and
+#: so are beams spanning more than it
 MAX_ANGLE = 2.0 * math.pi + 1e-3
 
 
@@ -45,7 +46,7 @@ def scan_geometry_problem(beams: int, angle_min: float, angle_increment: float,
         return f'non-finite angle_min/angle_increment ({angle_min}, {angle_increment})'
     if angle_increment == 0.0 and beams > 1:
         return 'angle_increment is 0'
-    if abs(angle_increment) * (beams - 1) > 2.0 * math.pi + 1e-3:
+    if abs(angle_increment) * (beams - 1) > MAX_ANGLE:
         return (f'{beams} beams x angle_increment {angle_increment:g} rad span more than a '
                 'full turn')
     if abs(angle_min) > MAX_ANGLE:

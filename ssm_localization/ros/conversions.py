@@ -18,7 +18,7 @@ from geometry_msgs.msg import Pose, PoseArray, PoseStamped, PoseWithCovarianceSt
 from nav_msgs.msg import OccupancyGrid
 import numpy as np
 from sensor_msgs.msg import LaserScan
-from ssm_localization.matching.scan import scan_geometry_problem, sensor_range
+from ssm_localization.matching.scan import ranges_to_points, scan_geometry_problem, sensor_range
 from ssm_localization.transforms import quaternion_to_yaw, yaw_to_quaternion
 
 # Index of x, y, yaw in the row-major 6x6 covariance of geometry_msgs (x, y, z, roll, pitch, yaw).
@@ -72,14 +72,9 @@ def scan_problem(args: ScanArgs, min_points: int = 3) -> str | None:
 
 
 def scan_points(args: ScanArgs) -> np.ndarray:
-    """(N, 2) points of the valid beams, in the laser frame (for markers)."""
-    angles = args.angle_min + args.angle_increment * np.arange(args.ranges.size)
-    lo = args.range_min if math.isfinite(args.range_min) else 0.0
-    hi = sensor_range(args.range_max)
-    with np.errstate(invalid='ignore'):
-        ok = np.isfinite(args.ranges) & (args.ranges >= lo) & (args.ranges <= hi)
-    r = args.ranges[ok]
-    return np.column_stack((r * np.cos(angles[ok]), r * np.sin(angles[ok])))
+    """(N, 2) points of the valid beams, in the laser frame (for markers; the core's rules)."""
+    return ranges_to_points(args.ranges, args.angle_min, args.angle_increment, args.range_min,
+                            args.range_max)[0]
 
 
 # --- time --------------------------------------------------------------------------------------
