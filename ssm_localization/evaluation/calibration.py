@@ -279,6 +279,27 @@ class ReliabilityBin:
         """Return observed minus predicted, in probability (NaN for an empty bin)."""
         return self.observed - self.mean_confidence if self.count else math.nan
 
+    def interval(self, z: float = 1.96) -> tuple[float, float]:
+        """
+        Return the Wilson score interval of the fraction right (95 % for ``z`` 1.96).
+
+        What chance alone allows: with 50 answers right 80 % of the time, the observed fraction
+        strays by 11 points either way one time in twenty, so a bin's gap beyond 2 points is not
+        by itself a miscalibration; a mean confidence outside this interval is one.
+        """
+        if not self.count:
+            return math.nan, math.nan
+        n, p = self.count, self.observed
+        centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+        half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+        return max(0.0, centre - half), min(1.0, centre + half)
+
+    @property
+    def beyond_chance(self) -> bool:
+        """Return True when the bin's mean confidence lies outside its 95 % interval."""
+        low, high = self.interval()
+        return self.count > 0 and not low <= self.mean_confidence <= high
+
 
 def reliability(confidence: Sequence[float], right: Sequence[bool],
                 edges: Sequence[float] = BIN_EDGES) -> list[ReliabilityBin]:
@@ -295,15 +316,24 @@ def reliability(confidence: Sequence[float], right: Sequence[bool],
 
 
 def format_reliability(bins: list[ReliabilityBin], min_count: int = 50) -> str:
-    """Return a table of ``bins``; bins with at least ``min_count`` answers are judged."""
-    lines = ['  confidence     n   mean conf  observed   gap']
+    """
+    Return a table of ``bins``; bins with at least ``min_count`` answers are judged.
+
+    Judged against the issue's 2 points, and against chance: ``95 % of right`` is the Wilson
+    interval of the fraction right (:meth:`ReliabilityBin.interval`), and a bin whose mean
+    confidence lies outside it is marked ``beyond chance``.
+    """
+    lines = ['  confidence     n   mean conf  observed   95 % of right   gap']
     for b in bins:
         if not b.count:
             continue
+        low, high = b.interval()
         mark = '' if b.count < min_count else ('  within 2 points' if abs(b.gap) <= 0.02
                                                else '  OFF by more than 2 points')
+        if mark and abs(b.gap) > 0.02:
+            mark += ', beyond chance' if b.beyond_chance else ', within chance'
         lines.append(f'  {b.low:.2f}-{b.high:.2f} {b.count:6d}   {b.mean_confidence:.3f}     '
-                     f'{b.observed:.3f}   {b.gap:+.3f}{mark}')
+                     f'{b.observed:.3f}   {low:.3f}-{high:.3f}     {b.gap:+.3f}{mark}')
     return '\n'.join(lines)
 
 

@@ -258,7 +258,8 @@ def plot_reliability(tables, path: str | Path, min_count: int = 50) -> Path:
     Draw reliability diagrams: mean reported confidence vs fraction right, per bin and split.
 
     ``tables`` maps a label (a split) to its ``calibration.reliability`` bins; bins with fewer
-    than ``min_count`` answers are drawn hollow. The band around the diagonal is +-2 points.
+    than ``min_count`` answers are drawn hollow. The band around the diagonal is +-2 points; each
+    bin's bar is the 95 % (Wilson) interval of its fraction right.
     """
     plt = _pyplot()
     fig, axes = plt.subplots(1, len(tables), figsize=(5.0 * len(tables), 5.0), squeeze=False)
@@ -268,6 +269,8 @@ def plot_reliability(tables, path: str | Path, min_count: int = 50) -> Path:
         used = [b for b in bins if b.count]
         for b in used:
             big = b.count >= min_count
+            low, high = b.interval()
+            ax.plot([b.mean_confidence] * 2, [low, high], '-', color='tab:blue', lw=1)
             ax.plot(b.mean_confidence, b.observed, 'o', ms=4 + 3 * np.log10(b.count),
                     mfc='tab:blue' if big else 'none', mec='tab:blue')
             ax.annotate(str(b.count), (b.mean_confidence, b.observed), fontsize=7,

@@ -42,6 +42,21 @@ def _norm(topic: str) -> str:
     return '/' + topic.strip('/')
 
 
+def missing_scan_topic(data, scan_topic: str = '/scan',
+                       topics: Iterable[str] | None = None) -> str:
+    """
+    Return a warning when the scan topic is to be played but the bag holds none of it ('' else).
+
+    A bag of a map alone stays playable with the default ``/scan``; a misspelled ``--scan-topic``
+    would otherwise play the other topics without a word.
+    """
+    scan_topic = _norm(scan_topic)
+    if data.scans or (topics and scan_topic not in {_norm(t) for t in topics}):
+        return ''
+    have = ', '.join(sorted(data.topic_counts)) or 'none'
+    return f'no messages on {scan_topic} in the bag (its topics: {have}); playing the others'
+
+
 def timeline(data, scan_topic: str = '/scan', topics: Iterable[str] | None = None,
              start_offset: float = 0.0, duration: float = 0.0,
              odom_frame: str = 'odom', base_frame: str = 'base_link') -> tuple[Any, list[Item]]:
@@ -182,6 +197,9 @@ def play_bag(bag: str | Path, rate: float = 1.0, loop: bool = False,
     try:
         node = BagPlayer(grid, items, scan_topic)
         log = node.get_logger().info
+        warning = missing_scan_topic(data, scan_topic, topics)
+        if warning:
+            node.get_logger().warning(warning)
         if wait_subscribers > 0 and not node.wait_for_subscribers(wait_subscribers):
             log('not every topic has a subscriber yet; playing anyway')
         time.sleep(max(delay, 0.0))

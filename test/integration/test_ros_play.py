@@ -113,3 +113,15 @@ def test_play_refuses_bad_ros_arguments_and_a_scan_topic_of_another_type(intel):
         play_bag(bag, ros_args=['--ros-args', '--bogus'], delay=0.0)
     with pytest.raises(BagError, match='/ground_truth has type'):
         play_bag(bag, scan_topic='/ground_truth', delay=0.0)
+
+
+def test_a_scan_topic_the_bag_lacks_is_said_not_passed_over():
+    """A misspelled ``--scan-topic`` warns, naming the topics the bag has; unselected, no word."""
+    from ssm_localization import read_bag
+    from ssm_localization.ros.play import missing_scan_topic
+    bag = find_bag('intel_queries')
+    data = read_bag(bag, scan_topic='/nope', require_scans=False)
+    warning = missing_scan_topic(data, '/nope')
+    assert warning.startswith('no messages on /nope in the bag') and '/scan' in warning
+    assert missing_scan_topic(data, 'nope', topics=['/map', '/odom']) == ''   # not selected
+    assert missing_scan_topic(read_bag(bag), '/scan') == ''

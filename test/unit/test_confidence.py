@@ -158,6 +158,21 @@ def test_reliability_bins():
     assert math.isnan(bins[3].observed)
 
 
+def test_a_bins_interval_tells_chance_from_miscalibration():
+    """Wilson's interval: 40 of 50 right is consistent with 0.75 reported, not with 0.6 or 0.9."""
+    from ssm_localization.evaluation.calibration import format_reliability, ReliabilityBin
+    fair = ReliabilityBin(0.7, 0.8, 50, 0.75, 40)
+    low, high = fair.interval()
+    assert low == pytest.approx(0.6696, abs=1e-3) and high == pytest.approx(0.8876, abs=1e-3)
+    assert not fair.beyond_chance
+    assert ReliabilityBin(0.6, 0.7, 50, 0.6, 40).beyond_chance
+    assert ReliabilityBin(0.9, 0.99, 50, 0.95, 40).beyond_chance
+    assert ReliabilityBin(0.99, 1.0, 400, 0.998, 400).interval()[1] == 1.0
+    table = format_reliability([fair, ReliabilityBin(0.9, 0.99, 50, 0.95, 40)])
+    assert 'OFF by more than 2 points, within chance' in table
+    assert 'OFF by more than 2 points, beyond chance' in table and '0.670-0.888' in table
+
+
 def test_model_needs_consistent_fields():
     with pytest.raises(ValueError, match='2 features'):
         ConfidenceModel(('a', 'b'), (0.0,), (1.0,), (1.0,), 0.0)
