@@ -100,7 +100,7 @@ DEFAULT_TRACK_OUT = ROOT / 'config' / 'track_confidence_model.yaml'
 DEFAULT_CACHE = Path('bench_data') / 'confidence_answers.json'
 DEFAULT_TRACK_CACHE = Path('bench_data') / 'track_confidence_answers.json'
 FOREIGN_SENSORS = ('full', 'range3.5', 'fov120')
-THRESHOLDS = (0.5, 0.7, 0.8, 0.85, 0.9, 0.93, 0.95, 0.97, 0.98, 0.99)
+THRESHOLDS = (0.5, 0.7, 0.8, 0.85, 0.9, 0.93, 0.94, 0.95, 0.97, 0.98, 0.99)
 
 
 def refusal(answer) -> str:
@@ -286,7 +286,7 @@ def main(argv=None) -> int:
         print(f'  {t:.2f} | {int(own_ok.sum())}, {wrong}, '
               f'{1 - wrong / max(int(own_ok.sum()), 1):.4f} | '
               f'{succ / max(len(own_full), 1):.3f} | {rates}')
-    for t in (0.85, 0.9, 0.95):
+    for t in (0.85, 0.9, 0.94, 0.95):
         per = []
         for b in sorted({a.map for a in own_full}):
             mine = [a for a in own_full if a.map == b]

@@ -96,10 +96,10 @@ class LocalizerConfig:
         0.1, 'a distinct pose that explains at least as much of the scan as the best and sees '
              'through at most this much more of its beams is a rival too (ambiguous): the best '
              "then wins only on beams through the map's specks")
-    min_confidence: float = param(0.95, 'a pose that passes the rules is ok only when its '
+    min_confidence: float = param(0.94, 'a pose that passes the rules is ok only when its '
                                         'calibrated confidence P(right | evidence) reaches '
-                                        'this (chosen for 99.9 % precision on the calibration '
-                                        'split)')
+                                        'this (the lowest, in steps of 0.01, at which the '
+                                        "calibration split's answers gain no wrong ok)")
     distinct_xy: float = param(0.5, 'poses further apart than this are distinct, metres')
     distinct_yaw: float = param(math.radians(10.0), '... or than this, rad')
     max_position_std: float = param(0.25, 'a larger reported position std along the weakest '

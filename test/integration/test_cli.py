@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from ssm_localization import read_bag, save_map_yaml, write_bag
 from ssm_localization.cli import main
+from ssm_localization.config.localization import LocalizerConfig
 from ssm_localization.mapping.map_io import OccupancyMap
 
 REQUIRED = ['stamp', 'x', 'y', 'yaw', 'status', 'latency_ms', 'node', 'score']
@@ -331,7 +332,8 @@ def test_bench_localize_writes_every_answer_it_graded(tmp_path, capsys):
         if r['kind'] == 'foreign':
             assert r['right'] == '0' and r['map'] != r['source'] and r['error_xy'] == ''
         if r['status'] == 'ok':
-            assert r['decided_by'] == 'confidence' and confidence >= 0.95
+            assert r['decided_by'] == 'confidence'
+            assert confidence >= LocalizerConfig().min_confidence
         if r['decided_by'] == 'rival':
             assert int(r['look_alikes']) >= 2
             assert confidence <= 1.0 / int(r['look_alikes']) + 1e-6
