@@ -53,7 +53,7 @@ def expanded_size(root: yaml.Node, limit: int = MAX_YAML_NODES) -> int:
             on_path.discard(key)
             total = 1 + sum(sizes[id(c)] for c in _children(node))
             if total > limit:
-                raise YamlBombError(f'aliases expand to more than {limit} nodes')
+                raise YamlBombError(f'more than {limit} nodes (aliases expanded)')
             sizes[key] = total
             continue
         if key in sizes:
@@ -105,6 +105,11 @@ def parse_yaml(data: bytes | str, where: str) -> Any:
         raise ValueError(f'{where}: malformed YAML: {clip(exc)}') from None
     except RecursionError:
         raise ValueError(f'{where}: malformed YAML: nested too deeply') from None
+    except (ValueError, KeyError, AttributeError, TypeError, OverflowError, IndexError) as exc:
+        # SafeLoader's constructors of explicit tags and odd scalars (``!!bool maybe``,
+        # ``!!timestamp nope``, ``!!int abc``, a date of month 13, a 5000-digit integer)
+        raise ValueError(f'{where}: malformed YAML: a value cannot be read '
+                         f'({type(exc).__name__}: {clip(exc)})') from None
 
 
 def load_yaml_file(path: str | Path, what: str, max_bytes: int = MAX_YAML_BYTES) -> Any:

@@ -15,6 +15,7 @@ import warnings
 
 import numpy as np
 
+from .bag_limits import check_bag_files, MAX_CHUNK_BYTES
 from .bag_records import (BagData, BagError, GT_TOPIC, MAP_TOPIC, ODOM_TOPIC, SCAN_TOPIC,
                           SCAN_TYPE, ScanRecord, typestore)
 from ..files.yaml_input import load_yaml_file
@@ -47,6 +48,12 @@ def _pose_of(pose_msg) -> Pose2 | str:
 
 
 def _resolve(path: str | Path) -> Path:
+    """
+    Return what ``rosbags`` opens for ``path`` after checking the files it would read.
+
+    :func:`bag_limits.check_bag_files`: regular files only, and no mcap chunk or file
+    compressed whole that expands beyond its limits.
+    """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f'bag not found: {path}')
@@ -55,16 +62,26 @@ def _resolve(path: str | Path) -> Path:
     metadata = path / 'metadata.yaml'
     if path.is_dir() and metadata.exists():
         # rosbags parses it too: refuse oversized files and alias bombs before it does
-        if not isinstance(load_yaml_file(metadata, 'bag metadata'), dict):
+        doc = load_yaml_file(metadata, 'bag metadata')
+        if not isinstance(doc, dict):
             raise BagError(f'{metadata}: bag metadata is not a mapping')
-    if path.is_dir() and not metadata.exists():
+        info = doc.get('rosbag2_bagfile_information')
+        info = info if isinstance(info, dict) else {}
+        listed = info.get('relative_file_paths')
+        names = [n for n in listed if isinstance(n, str)] if isinstance(listed, list) else []
+        mode = str(info.get('compression_mode') or '').upper()
+        check_bag_files([path / n for n in names] or sorted(path.glob('*.mcap*')),
+                        file_compressed=mode == 'FILE')
+        return path
+    if path.is_dir():
         mcaps = sorted(path.glob('*.mcap'))
         if len(mcaps) != 1:
             raise BagError(f'{path}: not a rosbag2 directory (no metadata.yaml) and holds '
                            f'{len(mcaps)} .mcap files')
-        return mcaps[0]
-    if path.is_file() and path.suffix != '.mcap':
+        path = mcaps[0]
+    if path.suffix != '.mcap':
         raise BagError(f'{path}: expected a rosbag2 directory or a .mcap file')
+    check_bag_files([path], file_compressed=False)
     return path
 
 
@@ -89,7 +106,7 @@ def _mcap_prefix(path: Path) -> tuple[list[tuple[str, str, bytes]], str]:
     reason = 'end of file'
     try:
         with path.open('rb') as fh:
-            for rec in stream_reader.StreamReader(fh, record_size_limit=2**30).records:
+            for rec in stream_reader.StreamReader(fh, record_size_limit=MAX_CHUNK_BYTES).records:
                 if isinstance(rec, records.Schema):
                     schemas[rec.id] = rec.name
                 elif isinstance(rec, records.Channel):

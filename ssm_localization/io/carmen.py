@@ -37,6 +37,9 @@ NO_RETURN = {'intel': 81.83, 'aces': 50.0, 'freiburg-079': 81.91, 'csail': 81.91
              'edmonton': 51.0}
 #: longest line read from a log (a FLASER line of 361 readings is about 3 kB)
 MAX_LINE_CHARS = 1 << 20
+#: most range readings a log may hold (400 MB as float64: 138 000 scans of 361 beams; the shared
+#: logs hold 61 000 to 1.7 M): a few MB of gzip can expand to any number of lines
+MAX_LOG_READINGS = 50_000_000
 
 
 @dataclass(frozen=True)
@@ -132,6 +135,9 @@ def read_carmen_log(path: str | Path, max_range: float | None = None) -> CarmenL
         if n < 1 or len(vals) != n or (n_beams is not None and n != n_beams):
             raise ValueError(f'{path}:{lineno}: expected {n_beams or n} readings, got {len(vals)}')
         n_beams = n
+        if (len(rows) + 1) * n > MAX_LOG_READINGS:
+            raise ValueError(f'{path}:{lineno}: more than {MAX_LOG_READINGS} range readings: a '
+                             f'log this long is refused (split it)')
         if odo is None:
             odo = last if last is not None else (0.0, 0.0, 0.0)
         elif last is not None:

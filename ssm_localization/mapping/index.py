@@ -17,6 +17,7 @@ import zlib
 
 import numpy as np
 
+from .index_file import check_declared, check_values, declared_arrays, FEATURE_PREFIX as _FEAT
 from .map_limits import check_map_cells, MapTooLargeError, MAX_MAP_CELLS
 from .occupancy import OccupancyMap
 from .raycast import beam_angles as _beam_angles
@@ -137,8 +138,6 @@ def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
 
 # --------------------------------------------------------------------------- npz storage
 
-_FEAT = 'feat__'
-
 
 def save_index(index: MapIndex, path: str | Path) -> Path:
     """Write ``index`` to ``path`` (compressed npz, no pickled objects); returns the path."""
@@ -181,24 +180,6 @@ def save_index(index: MapIndex, path: str | Path) -> Path:
     return path
 
 
-def declared_arrays(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-    """
-    ``{name: (shape, dtype)}`` of the arrays of an ``.npz`` file from their ``.npy`` headers.
-
-    Without decompressing their data (a small file may declare gigabytes).
-    """
-    out = {}
-    with zipfile.ZipFile(path) as zf:
-        for member in zf.namelist():
-            with zf.open(member) as fh:
-                version = np.lib.format.read_magic(fh)
-                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                               else np.lib.format.read_array_header_2_0)
-                shape, _, dtype = read_header(fh)
-            out[member.removesuffix('.npy')] = (tuple(shape), dtype)
-    return out
-
-
 def load_index(path: str | Path, expected_map: OccupancyMap | None = None,
                max_cells: int = MAX_MAP_CELLS) -> MapIndex:
     """
@@ -217,15 +198,18 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None,
             if len(shape) != 2:
                 raise ValueError(f'{name} has shape {shape}, expected (H, W)')
             check_map_cells(shape[1], shape[0], max_cells, f'{path}: {name}')
+        if 'format_version' not in declared:
+            raise ValueError('not an ssm_localization index (no format_version)')
+        k, beams = check_declared(declared)
         with np.load(path, allow_pickle=False) as z:
             data = {key: z[key] for key in z.files}
+        version = check_values(data, k)
+    except KeyError as exc:
+        raise ValueError(f'{path}: index file lacks array {exc}') from None
     except (ValueError, OSError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
         if isinstance(exc, MapTooLargeError):
             raise
         raise ValueError(f'{path}: not a readable index file ({clip(exc)})') from None
-    if 'format_version' not in data:
-        raise ValueError(f'{path}: not an ssm_localization index (no format_version)')
-    version = int(data['format_version'])
     if version != FORMAT_VERSION:
         raise ValueError(f'{path}: index format version {version}, this ssm_localization reads '
                          f'version {FORMAT_VERSION}; rebuild it with `ssm_localization index`')
@@ -241,10 +225,12 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None,
                              f'this map')
         try:
             config = config_from_json(IndexConfig, str(data['config_json']))
-        except (ValueError, TypeError) as exc:
-            raise ValueError(f'stored parameters do not fit this ssm_localization ({exc}); '
-                             f'rebuild the index') from None
-        k = len(data['node_xy'])
+        except (ValueError, TypeError, AttributeError, RecursionError) as exc:
+            raise ValueError(f'stored parameters do not fit this ssm_localization '
+                             f'({clip(exc)}); rebuild the index') from None
+        if config.beams != beams:
+            raise ValueError(f'stored parameters say {config.beams} beams, the virtual scans '
+                             f'have {beams} (corrupt file)')
         names = [str(n) for n in data['feature_fields']]
         if set(names) != {f.name for f in dataclasses.fields(ScanFeatures)}:
             raise ValueError(f'scan features stored with fields {names} do not match this '
@@ -254,16 +240,18 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None,
         for i in range(k):
             arrs = {n: data[f'{_FEAT}{n}'][offs[n][i]:offs[n][i + 1]] for n in names}
             features.append(ScanFeatures.from_arrays(arrs))
+        width = config.matcher.desc_radial_bins * config.matcher.desc_angular_bins
+        if k and data[f'{_FEAT}descriptors'].shape[1] != width:
+            raise ValueError(f'descriptors {data[f"{_FEAT}descriptors"].shape[1]} wide, the '
+                             f'stored matcher parameters make {width} (corrupt file)')
         index = MapIndex(
             map=occ_map, node_xy=data['node_xy'], node_kind=data['node_kind'],
             node_sensor_pose=data['node_sensor_pose'], ranges=data['ranges'],
             beam_angles=data['beam_angles'], features=features, gvd_mask=data['gvd_mask'],
             config=config, map_checksum=checksum,
             version=version, edges=data['edges'], node_clearance=data['node_clearance'])
-    except KeyError as exc:
-        raise ValueError(f'{path}: index file lacks array {exc}') from None
-    except ValueError as exc:
-        raise ValueError(f'{path}: {exc}') from None
+    except (ValueError, TypeError, IndexError, OverflowError) as exc:
+        raise ValueError(f'{path}: {clip(exc)}') from None
     shapes_ok = (index.node_kind.shape == (k,) and index.node_sensor_pose.shape == (k, 3)
                  and index.ranges.shape == (k, len(index.beam_angles))
                  and index.gvd_mask.shape == occ_map.shape)

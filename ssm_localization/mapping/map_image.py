@@ -40,15 +40,22 @@ def header_size(path: str | Path) -> tuple[int, int] | None:
     return None
 
 
+class UnsupportedImage(ValueError):
+    """An image that decodes but whose pixels have no agreed meaning as a map."""
+
+
 def _decode(path: Path, max_cells: int, where: str) -> np.ndarray:
     """:func:`read_shade` without the translation of Pillow's errors."""
     with Image.open(path) as img:
         check_map_cells(*img.size, max_cells, where)
         img.load()
         mode = img.mode
-        if mode in ('I;16', 'I;16B', 'I;16L', 'I'):
-            a = np.asarray(img, dtype=np.float64)
-            return a / (65535.0 if mode.startswith('I;16') else max(float(a.max()), 1.0))
+        if mode.startswith('I;16') or (mode == 'I' and img.format == 'PPM'):
+            # 16-bit samples; Pillow scales a PGM of any maxval above 255 to 0..65535
+            return np.asarray(img, dtype=np.float64) / 65535.0
+        if mode == 'I':
+            raise UnsupportedImage(f'{where}: 32-bit integer pixels have no agreed full '
+                                   f'scale; save the map as an 8- or 16-bit image (PGM or PNG)')
         if mode == 'F':
             return np.clip(np.asarray(img, dtype=np.float64), 0.0, 1.0)
         if mode not in ('L', 'RGB'):
@@ -80,7 +87,7 @@ def read_shade(path: str | Path, max_cells: int) -> np.ndarray:
             warnings.simplefilter('ignore', UserWarning)
             warnings.simplefilter('ignore', Image.DecompressionBombWarning)
             return _decode(path, max_cells, where)
-    except MapTooLargeError:
+    except (MapTooLargeError, UnsupportedImage):
         raise
     except UnidentifiedImageError:
         raise ValueError(f'{where}: not a readable image') from None

@@ -89,8 +89,10 @@ def load_map_yaml(path: str | Path, max_cells: int = MAX_MAP_CELLS) -> Occupancy
                          f'{FLOAT32_MAX:.3g}), as map messages carry it')
     check_origin(origin, str(path))
     negate = _field(doc, 'negate', path, bool, required=False, default=False)
-    occ_t = _field(doc, 'occupied_thresh', path, float, required=False, default=0.65)
-    free_t = _field(doc, 'free_thresh', path, float, required=False, default=0.25)
+    # required, as nav2's map_server requires them (a default would read a map other than nav2
+    # serves, or silently the usual unknown grey 205 as free with 0.25)
+    occ_t = _field(doc, 'occupied_thresh', path, float)
+    free_t = _field(doc, 'free_thresh', path, float)
     if not 0.0 <= occ_t <= 1.0:
         raise ValueError(f"{path}: field 'occupied_thresh' must be in [0, 1], got {occ_t}")
     if not 0.0 <= free_t <= 1.0:

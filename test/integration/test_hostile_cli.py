@@ -180,6 +180,45 @@ def _index_declaring(d: Path) -> list[str]:
     return ['replay', 'bag.mcap', '--index', 'index.npz', '-o', 'out/results.csv']
 
 
+def _index_with_junk(d: Path) -> list[str]:
+    """Write a real index of the room plus a member of 300 M zeros (2.4 GB) streamed: 2.3 MB."""
+    from ssm_localization import build_index, load_map_yaml, save_index
+    save_index(build_index(load_map_yaml(d / room_map(d))), d / 'real.npz')
+    with zipfile.ZipFile(d / 'real.npz') as zin, \
+            zipfile.ZipFile(d / 'index.npz', 'w', zipfile.ZIP_DEFLATED) as zout:
+        for item in zin.infolist():
+            zout.writestr(item, zin.read(item))
+        with zout.open('junk.npy', 'w', force_zip64=True) as fh:
+            np.lib.format.write_array_header_1_0(
+                fh, {'descr': '<f8', 'fortran_order': False, 'shape': (300_000_000,)})
+            zeros = bytes(1 << 24)
+            for _ in range(143):
+                fh.write(zeros)
+    (d / 'real.npz').unlink()
+    _write(d, 'bag.mcap', _garbage())
+    return ['replay', 'bag.mcap', '--index', 'index.npz', '-o', 'out/results.csv']
+
+
+def _mcap_chunk_bomb(d: Path) -> list[str]:
+    """30 bytes of header and a chunk declaring 10^9 bytes uncompressed."""
+    content = (struct.pack('<QQQI', 0, 0, 10 ** 9, 0) + struct.pack('<I', 4) + b'zstd'
+               + struct.pack('<Q', 9) + bytes(9))
+    _write(d, 'bag.mcap', b'\x89MCAP0\r\n' + struct.pack('<BQ', 0x06, len(content)) + content)
+    return ['replay', 'bag.mcap', '-o', 'out/results.csv']
+
+
+def _fifo_bag(d: Path) -> list[str]:
+    (d / 'bag').mkdir()
+    os.mkfifo(d / 'bag' / 'bag.mcap')
+    return ['replay', 'bag', '-o', 'out/results.csv']
+
+
+def _tiff_map(d: Path) -> list[str]:
+    from PIL import Image
+    Image.fromarray(np.full((64, 64), 1000, np.int32)).save(d / 'map.tif')
+    return _index(d, map_with_image(d, 'map.tif'))
+
+
 def _carmen(d: Path, *extra: str, log: str = 'room.log') -> list[str]:
     if not (d / log).exists():
         carmen_log(d / log)
@@ -213,7 +252,7 @@ CASES: list[Case] = [
          ('map.yaml', 'malformed YAML')),
     Case('billion laughs map YAML (350 bytes, 9 levels)',
          lambda d: _index(d, _write(d, 'map.yaml', billion_laughs())),
-         ('map.yaml', 'aliases expand to more than 100000 nodes')),
+         ('map.yaml', 'more than 100000 nodes (aliases expanded)')),
     Case('map YAML with an alias inside its own anchor',
          lambda d: _index(d, _write(d, 'map.yaml', 'image: &a [*a]\n')),
          ('map.yaml', 'refers to a node that contains it')),
@@ -323,6 +362,18 @@ CASES: list[Case] = [
          ('index.npz', 'not a readable index file')),
     Case('index file declaring a 10000 x 10000 map', _index_declaring,
          ('index.npz', '10000 x 10000', 'max_map_cells')),
+    Case('index file: a real index plus a member of 2.4 GB of zeros (2.3 MB)',
+         _index_with_junk, ('index.npz', "unexpected arrays ['junk']")),
+    Case('bag: an mcap chunk declaring 10^9 bytes', _mcap_chunk_bomb,
+         ('bag.mcap', 'declares 1000000000 bytes', 'refused before decompressing')),
+    Case('bag: its .mcap is a FIFO', _fifo_bag, ('bag.mcap', 'not a regular file')),
+    Case('map image of 32-bit integer pixels (TIFF)', _tiff_map,
+         ('map.tif', '32-bit integer pixels')),
+    Case('map YAML without `free_thresh`', lambda d: _map_field(d, 'free_thresh: 0.196\n', ''),
+         ('map.yaml', "missing field 'free_thresh'")),
+    Case('map YAML with `negate: !!bool maybe`',
+         lambda d: _map_field(d, 'negate: 0', 'negate: !!bool maybe'),
+         ('map.yaml', 'malformed YAML: a value cannot be read')),
     Case('replay `-o` under a regular file',
          lambda d: ['replay', _write(d, 'bag.mcap', _garbage()), '-o', 'bag.mcap/results.csv'],
          ('results file bag.mcap/results.csv', 'not a directory')),

@@ -55,6 +55,18 @@ def test_malformed_log(tmp_path):
         carmen.read_carmen_log(tmp_path / 'none.log')
 
 
+def test_a_log_of_more_readings_than_the_package_reads_is_refused(tmp_path, monkeypatch):
+    """A few MB of gzip can expand to a million scans: the readings are counted as they come."""
+    line = 'FLASER 4 1.0 2.0 3.0 4.0 0 0 0 0 0 0 1.5 host 1.5\n'
+    path = tmp_path / 'long.log'
+    path.write_text(line * 40)
+    monkeypatch.setattr(carmen, 'MAX_LOG_READINGS', 100)
+    with pytest.raises(ValueError, match=r'long.log:26: more than 100 range readings'):
+        carmen.read_carmen_log(path)
+    path.write_text(line * 25)
+    assert len(carmen.read_carmen_log(path)) == 25
+
+
 def test_select_scans():
     np.testing.assert_array_equal(carmen.select_scans(10, 'even'), [0, 2, 4, 6, 8])
     np.testing.assert_array_equal(carmen.select_scans(10, 'odd', every=2), [1, 5, 9])

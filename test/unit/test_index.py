@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import io
 import math
 from pathlib import Path
+import re
 import zipfile
 
 from helpers import shared_data
@@ -237,6 +239,60 @@ def test_node_kinds_are_small_ints(built):
     assert index.node_kind.dtype == np.int8
     assert set(index.node_kind.tolist()) <= {int(k) for k in NodeKind}
     assert math.isclose(float(index.beam_angles[0]), -math.pi)
+
+
+def _declaring(src: Path, dst: Path, name: str, shape: tuple, dtype: str = '<f8') -> Path:
+    """Copy ``src`` with one more member whose header declares ``shape``; its data is 8 bytes."""
+    header = {'descr': dtype, 'fortran_order': False, 'shape': shape}
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, 'w') as zout:
+        for item in zin.infolist():
+            if item.filename != f'{name}.npy':
+                zout.writestr(item, zin.read(item))
+        buf = io.BytesIO()
+        np.lib.format.write_array_header_2_0(buf, header)
+        zout.writestr(f'{name}.npy', buf.getvalue() + bytes(8))
+    return dst
+
+
+@pytest.mark.parametrize('name, shape, why', [
+    ('junk', (300_000_000,), 'unexpected arrays'),               # a bomb in a member of its own
+    ('ranges', (10 ** 9, 360), 'ranges has shape'),            # in one of the layout's
+    ('feat__points', (10 ** 12, 2), 'one row per beam'),
+    ('node_xy', (5,), 'expected (K, 2)'),
+])
+def test_declared_shapes_are_checked_before_anything_is_decompressed(built, tmp_path, name,
+                                                                     shape, why):
+    """A few bytes may declare gigabytes: the headers are checked first, then nothing is read."""
+    index, _ = built
+    path = save_index(index, tmp_path / 'idx.npz')
+    bad = _declaring(path, tmp_path / 'bad.npz', name, shape)
+    with pytest.raises(ValueError, match=re.escape(why)):
+        load_index(bad)
+
+
+@pytest.mark.parametrize('changes, why', [
+    (lambda a: {'node_xy': np.where(np.arange(a['node_xy'].size).reshape(-1, 2) == 0, np.nan,
+                                    a['node_xy'])}, 'node_xy holds non-numbers, NaN or inf'),
+    (lambda a: {'feat__tangents': a['feat__tangents'] * np.inf}, 'feat__tangents holds'),
+    (lambda a: {'ranges': -a['ranges']}, 'negative ranges'),
+    (lambda a: {'node_kind': a['node_kind'] + 99}, 'kinds outside'),
+    (lambda a: {'edges': a['edges'] + 10 ** 9}, 'node numbers outside'),
+    (lambda a: {'format_version': np.asarray(1.9)}, 'not a whole number'),
+    (lambda a: {'format_version': np.asarray(np.inf)}, 'not a whole number'),
+    (lambda a: {'feat__points__offsets': a['feat__points__offsets'][::-1].copy()},
+     'does not split'),
+    (lambda a: {'feat__descriptors': a['feat__descriptors'][:, :3].copy()}, '3 wide'),
+    (lambda a: {'config_json': np.asarray('[1, 2]')}, 'stored parameters do not fit'),
+    (lambda a: {'config_json': np.asarray('[' * 100000)}, 'stored parameters do not fit'),
+])
+def test_values_no_build_writes_are_refused_naming_the_file(built, tmp_path, changes, why):
+    index, _ = built
+    path = save_index(index, tmp_path / 'idx.npz')
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    bad = _rewrite(path, tmp_path / 'bad.npz', **changes(arrays))
+    with pytest.raises(ValueError, match=re.escape(str(bad)) + '.*' + re.escape(why)):
+        load_index(bad)
 
 
 def test_refuses_features_of_another_matcher(built, tmp_path):

@@ -79,6 +79,25 @@ def test_scale_and_raw_modes(tmp_path):
     assert r.data.tolist() == [[0, -1, -1, 50, -1]]
 
 
+def test_a_16_bit_pgm_reads_as_its_8_bit_twin(tmp_path):
+    """Samples scaled by 65535 whatever the maxval (not by the image's brightest pixel)."""
+    px = np.array([[0, 254, 205, 100]])
+    eight = load_map_yaml(_write(tmp_path, px, BASE))
+    for maxval in (65535, 1000):
+        wide = np.round(px * maxval / 255).astype('>u2')
+        (tmp_path / 'w.pgm').write_bytes(b'P5\n4 1\n%d\n' % maxval + wide.tobytes())
+        (tmp_path / 'w.yaml').write_text(BASE.replace('m.pgm', 'w.pgm'))
+        assert load_map_yaml(tmp_path / 'w.yaml').data.tolist() == eight.data.tolist()
+    assert eight.data.tolist() == [[100, 0, -1, -1]]
+
+
+def test_a_32_bit_image_is_refused(tmp_path):
+    Image.fromarray(np.array([[0, 500, 1000]], np.int32)).save(tmp_path / 'm.tif')
+    (tmp_path / 'm.yaml').write_text(BASE.replace('m.pgm', 'm.tif'))
+    with pytest.raises(ValueError, match='32-bit integer pixels'):
+        load_map_yaml(tmp_path / 'm.yaml')
+
+
 def test_rgba_png_alpha_ignored(tmp_path):
     px = np.zeros((2, 2, 4), np.uint8)
     px[..., :3] = 254

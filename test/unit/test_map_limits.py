@@ -35,7 +35,8 @@ def _png_header(path, width, height):
 
 def _map_yaml(tmp_path, image):
     (tmp_path / 'm.yaml').write_text(f'image: {image}\nresolution: 0.05\n'
-                                     f'origin: [0.0, 0.0, 0.0]\n')
+                                     f'origin: [0.0, 0.0, 0.0]\noccupied_thresh: 0.65\n'
+                                     f'free_thresh: 0.196\n')
     return tmp_path / 'm.yaml'
 
 
