@@ -41,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f'{args.map}: the map gives no nodes (no free space with walls around '
                          f'it at {occ_map.resolution:g} m a cell): nothing to localize against, '
                          f'{args.output} not written')
+    if not any(len(f) for f in index.features):
+        raise ValueError(f'{args.map}: no node of the map sees a wall (its virtual scans have no '
+                         f'returns): nothing to localize against, {args.output} not written')
     path = save_index(index, args.output)
     kinds = ', '.join(f'{name} {n}' for name, n in index.kind_counts().items())
     print(f'{len(index)} nodes ({kinds}); built in {elapsed:.2f} s; '

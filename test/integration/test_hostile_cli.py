@@ -213,6 +213,11 @@ def _fifo_bag(d: Path) -> list[str]:
     return ['replay', 'bag', '-o', 'out/results.csv']
 
 
+def _wall_free_map(d: Path) -> list[str]:
+    (d / 'free.pgm').write_bytes(b'P5\n64 64\n255\n' + bytes([254]) * 64 * 64)
+    return _index(d, map_with_image(d, 'free.pgm'), '--quiet')
+
+
 def _tiff_map(d: Path) -> list[str]:
     from PIL import Image
     Image.fromarray(np.full((64, 64), 1000, np.int32)).save(d / 'map.tif')
@@ -290,6 +295,8 @@ CASES: list[Case] = [
                                                                  'free_thresh: 0.0')),
                           '--quiet'),
          ('map.yaml', 'gives no nodes', 'not written')),
+    Case('map without walls (a 64 x 64 free square), `--quiet`', _wall_free_map,
+         ('map.yaml', 'no node of the map sees a wall', 'not written')),
     Case('unknown mode', lambda d: _map_field(d, 'negate: 0', 'negate: 0\nmode: fancy'),
          ('map.yaml', "'mode' must be one of", 'fancy')),
     Case('map YAML that is a directory', lambda d: (d / 'maps').mkdir() or _index(d, 'maps'),
