@@ -17,7 +17,8 @@ import zlib
 
 import numpy as np
 
-from .index_file import check_declared, check_values, declared_arrays, FEATURE_PREFIX as _FEAT
+from .index_file import (check_declared, check_values, declared_arrays, FEATURE_PREFIX as _FEAT,
+                         stored_version, WrongVersion)
 from .map_limits import check_map_cells, MapTooLargeError, MAX_MAP_CELLS
 from .occupancy import OccupancyMap
 from .raycast import beam_angles as _beam_angles
@@ -198,21 +199,21 @@ def load_index(path: str | Path, expected_map: OccupancyMap | None = None,
             if len(shape) != 2:
                 raise ValueError(f'{name} has shape {shape}, expected (H, W)')
             check_map_cells(shape[1], shape[0], max_cells, f'{path}: {name}')
-        if 'format_version' not in declared:
-            raise ValueError('not an ssm_localization index (no format_version)')
+        version = stored_version(path, declared)     # another version: another layout
+        if version != FORMAT_VERSION:
+            raise WrongVersion(f'{path}: index format version {version}, this ssm_localization '
+                               f'reads version {FORMAT_VERSION}; rebuild it with '
+                               f'`ssm_localization index`')
         k, beams = check_declared(declared)
         with np.load(path, allow_pickle=False) as z:
             data = {key: z[key] for key in z.files}
-        version = check_values(data, k)
+        check_values(data, k)
     except KeyError as exc:
         raise ValueError(f'{path}: index file lacks array {exc}') from None
     except (ValueError, OSError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
-        if isinstance(exc, MapTooLargeError):
+        if isinstance(exc, (MapTooLargeError, WrongVersion)):
             raise
         raise ValueError(f'{path}: not a readable index file ({clip(exc)})') from None
-    if version != FORMAT_VERSION:
-        raise ValueError(f'{path}: index format version {version}, this ssm_localization reads '
-                         f'version {FORMAT_VERSION}; rebuild it with `ssm_localization index`')
     try:
         occ_map = OccupancyMap(data['map_data'], float(data['map_resolution']),
                                tuple(data['map_origin'].tolist()), str(data['map_frame_id']))

@@ -1,15 +1,17 @@
 """
 What an index file (``.npz``, ``index.save_index``) may hold, checked before and after loading.
 
-An index file is untrusted input: a user's download, a stale file, a tampered one. Before any
-array is decompressed, :func:`check_declared` reads the ``.npy`` headers of its members
-(:func:`declared_arrays`) and refuses members the layout does not have, shapes that do not fit
+An index file is untrusted input: a user's download, a stale file, a tampered one. Its format
+version is read first and alone (:func:`stored_version`: another version has another layout,
+and saying so is the useful answer). Before any other array is decompressed,
+:func:`check_declared` reads the ``.npy`` headers of its members (:func:`declared_arrays`) and
+refuses members the layout does not have, shapes that do not fit
 together (every per-node array has the same number of nodes K, every virtual scan the same number
 of beams B, a node's features at most one per beam), and a total that would not fit the memory
 budget of the largest map the package loads (a few kilobytes of zeros deflate from gigabytes).
 After loading, :func:`check_values` refuses values no index build writes (NaN and inf where a
-pose, a feature or a clearance is stored, node kinds and edges out of range, a format version
-that is not a whole number). Each refusal is a ``ValueError`` naming the array.
+pose, a feature or a clearance is stored, node kinds and edges out of range, offsets that do
+not split the rows). Each refusal is a ``ValueError`` naming the array.
 """
 from __future__ import annotations
 
@@ -130,17 +132,38 @@ def check_declared(declared: Declared) -> tuple[int, int]:
     return k, b
 
 
+class WrongVersion(ValueError):
+    """An index file of another format version (another layout: rebuild it)."""
+
+
+def stored_version(path: Path, declared: Declared) -> int:
+    """
+    Return the file's format version, read alone (a whole number in one value of 8 bytes at most).
+
+    Read before the layout is checked: a file of another version has another layout, and
+    saying so is the useful answer.
+    """
+    if 'format_version' not in declared:
+        raise ValueError('not an ssm_localization index (no format_version)')
+    shape, dtype = declared['format_version']
+    if shape != () or dtype.itemsize > SCALARS['format_version']:
+        raise ValueError(f'array format_version has shape {shape} and items of {dtype.itemsize} '
+                         f'bytes, expected one value')
+    with np.load(path, allow_pickle=False) as z:
+        version = z['format_version']
+    if version.dtype.kind not in 'iu':
+        raise ValueError(f'format_version {version.item()!r} is not a whole number')
+    return int(version)
+
+
 def _finite(data: dict[str, np.ndarray], name: str) -> None:
     a = data[name]
     if a.dtype.kind not in 'iuf' or not np.isfinite(a).all():
         raise ValueError(f'array {name} holds non-numbers, NaN or inf')
 
 
-def check_values(data: dict[str, np.ndarray], k: int) -> int:
-    """Refuse values no index build writes; return the format version (a whole number)."""
-    version = data['format_version']
-    if version.dtype.kind not in 'iu':
-        raise ValueError(f'format_version {version.item()!r} is not a whole number')
+def check_values(data: dict[str, np.ndarray], k: int) -> None:
+    """Refuse values no index build writes."""
     for name in ('node_xy', 'node_sensor_pose', 'node_clearance', 'beam_angles', 'map_origin',
                  'map_resolution', *(f'{FEATURE_PREFIX}{n}' for n in FEATURE_TAILS)):
         _finite(data, name)
@@ -161,4 +184,3 @@ def check_values(data: dict[str, np.ndarray], k: int) -> int:
                 or (np.diff(offsets) < 0).any()):
             raise ValueError(f'array {FEATURE_PREFIX}{name}__offsets does not split its '
                              f'{rows} rows among the nodes')
-    return int(version)

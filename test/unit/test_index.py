@@ -130,6 +130,11 @@ def test_refuses_other_version(built, tmp_path):
                    format_version=np.asarray(FORMAT_VERSION + 1, np.int64))
     with pytest.raises(ValueError, match='version'):
         load_index(bad)
+    # another version has another layout: the version is what is said, not the layout
+    newer = _rewrite(path, tmp_path / 'newer.npz', node_names=np.asarray(['a', 'b']),
+                     format_version=np.asarray(FORMAT_VERSION + 1, np.int64))
+    with pytest.raises(ValueError, match=f'index format version {FORMAT_VERSION + 1}.*rebuild'):
+        load_index(newer)
 
 
 def test_refuses_other_map(built, tmp_path):
