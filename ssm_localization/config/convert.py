@@ -26,7 +26,12 @@ def as_mapping(value: Any, name: str) -> dict:
 
 
 def unflatten(flat: dict[str, Any]) -> dict:
-    """``{'a.b': 1}`` -> ``{'a': {'b': 1}}``."""
+    """
+    ``{'a.b': 1}`` -> ``{'a': {'b': 1}}``.
+
+    A parameter given twice, once dotted and once in its group (``index.beams: 180`` beside
+    ``index: {beams: 360}``), is refused: which one wins would depend on the order of the keys.
+    """
     out: dict = {}
     for key, value in flat.items():
         parts = str(key).split('.')
@@ -35,10 +40,21 @@ def unflatten(flat: dict[str, Any]) -> dict:
             cur = cur.setdefault(p, {})
             if not isinstance(cur, dict):
                 raise ValueError(f'parameter {echo(key)}: {p!r} is also given a value')
-        if isinstance(cur.get(parts[-1]), dict) and not isinstance(value, dict):
-            raise ValueError(f'parameter {echo(key)} is also a group of parameters')
-        cur[parts[-1]] = value
+        _put(cur, parts[-1], value, str(key))
     return out
+
+
+def _put(group: dict, name: str, value: Any, where: str) -> None:
+    """Set ``group[name] = value``, merging groups and refusing a parameter given twice."""
+    if name not in group:
+        group[name] = value
+    elif isinstance(group[name], dict) and isinstance(value, dict):
+        for key, item in value.items():
+            _put(group[name], str(key), item, f'{where}.{key}')
+    elif isinstance(group[name], dict):
+        raise ValueError(f'parameter {echo(where)} is also a group of parameters')
+    else:
+        raise ValueError(f'parameter {echo(where)} is given twice (dotted and in its group)')
 
 
 def flatten(obj: Any, prefix: str = '') -> dict[str, Any]:

@@ -88,6 +88,21 @@ def test_flatten_unflatten_round_trip():
     loc = LocalizerConfig(top_n=3, laser_pose=(1.0, 0.0, math.pi))
     assert from_dict(LocalizerConfig, unflatten(flatten(loc))) == loc
     assert unflatten({'a.b.c': 1, 'a.d': 2, 'e': 3}) == {'a': {'b': {'c': 1}, 'd': 2}, 'e': 3}
+    # dotted and nested keys of one group merge, in either order
+    both = {'index.beams': 180, 'index': {'max_range': 9.0}}
+    assert unflatten(both) == unflatten(dict(reversed(both.items()))) == \
+        {'index': {'beams': 180, 'max_range': 9.0}}
+
+
+@pytest.mark.parametrize('flat, why', [
+    ({'index.beams': 180, 'index': {'beams': 360}}, "'index.beams' is given twice"),
+    ({'index': {'beams': 360}, 'index.beams': 180}, "'index.beams' is given twice"),
+    ({'index': {'matcher': {'gap': 1}}, 'index.matcher': 5}, 'is also a group'),
+    ({'index.matcher.gap': 1, 'index': {'matcher': 5}}, 'is also a group'),
+])
+def test_a_parameter_given_twice_is_refused_whatever_the_order(flat, why):
+    with pytest.raises(ValueError, match=why):
+        unflatten(flat)
 
 
 # --------------------------------------------------------------------------- load_configs
