@@ -15,6 +15,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 from scipy.optimize import minimize
+from scipy.stats import binomtest
 
 from ..config.confidence import ConfidenceModel, REFUSED_REASONS
 
@@ -279,9 +280,9 @@ class ReliabilityBin:
         """Return observed minus predicted, in probability (NaN for an empty bin)."""
         return self.observed - self.mean_confidence if self.count else math.nan
 
-    def interval(self, z: float = 1.96) -> tuple[float, float]:
+    def interval(self, level: float = 0.95) -> tuple[float, float]:
         """
-        Return the Wilson score interval of the fraction right (95 % for ``z`` 1.96).
+        Return the Wilson score interval of the fraction right (scipy's ``binomtest``).
 
         What chance alone allows: with 50 answers right 80 % of the time, the observed fraction
         strays by 11 points either way one time in twenty, so a bin's gap beyond 2 points is not
@@ -289,10 +290,8 @@ class ReliabilityBin:
         """
         if not self.count:
             return math.nan, math.nan
-        n, p = self.count, self.observed
-        centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-        half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-        return max(0.0, centre - half), min(1.0, centre + half)
+        ci = binomtest(self.right, self.count).proportion_ci(level, method='wilson')
+        return float(ci.low), float(ci.high)
 
     @property
     def beyond_chance(self) -> bool:

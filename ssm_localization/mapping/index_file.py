@@ -164,8 +164,9 @@ def _finite(data: dict[str, np.ndarray], name: str) -> None:
 
 def check_values(data: dict[str, np.ndarray], k: int) -> None:
     """Refuse values no index build writes."""
-    for name in ('node_xy', 'node_sensor_pose', 'node_clearance', 'beam_angles', 'map_origin',
-                 'map_resolution', *(f'{FEATURE_PREFIX}{n}' for n in FEATURE_TAILS)):
+    # (the map's own fields are OccupancyMap's to check, as for a map from YAML or a message)
+    for name in ('node_xy', 'node_sensor_pose', 'node_clearance', 'beam_angles',
+                 *(f'{FEATURE_PREFIX}{n}' for n in FEATURE_TAILS)):
         _finite(data, name)
     ranges = data['ranges']
     if ranges.dtype.kind != 'f' or np.isnan(ranges).any() or (ranges < 0.0).any():
