@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from .bench.data import DATA_ENV, DATA_HELP, default_data_dir
-from .cli import main as cli_main
+from .cli.main import main as cli_main
 from .evaluation.plotting import plot_match
 from .io.carmen import read_carmen_log
 from .matching.matcher import match_scans

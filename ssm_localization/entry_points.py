@@ -13,7 +13,7 @@ from .threads import limit_blas_threads
 def ssm_localization() -> int:
     """Run the ``ssm_localization`` command line."""
     limit_blas_threads()
-    from .cli import main
+    from .cli.main import main
     return main()
 
 

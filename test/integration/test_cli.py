@@ -13,7 +13,7 @@ from helpers import find_bag, shared_data
 import numpy as np
 import pytest
 from ssm_localization import read_bag, save_map_yaml, write_bag
-from ssm_localization.cli import main
+from ssm_localization.cli.main import main
 from ssm_localization.config.localization import LocalizerConfig
 from ssm_localization.mapping.map_io import OccupancyMap
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from ssm_localization import (BagError, iter_scans, load_map_yaml, OccupancyMap, read_bag,
                               ScanRecord, write_bag)
-from ssm_localization.cli import main
+from ssm_localization.cli.main import main
 from ssm_localization.io.bag_reader import bag_topics
 
 

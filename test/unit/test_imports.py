@@ -13,6 +13,7 @@ import os
 import subprocess
 import sys
 
+from helpers import REPO
 import pytest
 import ssm_localization
 from ssm_localization.threads import THREAD_VARIABLES
@@ -156,3 +157,25 @@ def test_the_installed_console_scripts_go_through_the_wrapper():
         'ssm_localization': 'ssm_localization.entry_points:ssm_localization',
         'global_localizer': 'ssm_localization.entry_points:global_localizer',
         'map_indexer': 'ssm_localization.entry_points:map_indexer'}
+
+
+def test_every_module_imports_on_its_own():
+    """Each module, imported first in a process (as a script or a user would), loads."""
+    code = ('import importlib, json, pathlib, sys\n'
+            'root = pathlib.Path(sys.argv[1])\n'
+            'names = sorted(".".join(p.relative_to(root.parent).with_suffix("").parts)'
+            '.removesuffix(".__init__") for p in root.rglob("*.py"))\n'
+            'bad = {}\n'
+            'for name in names:\n'
+            '    for m in [m for m in sys.modules if m.split(".")[0] == "ssm_localization"]:\n'
+            '        del sys.modules[m]\n'
+            '    try:\n'
+            '        importlib.import_module(name)\n'
+            '    except ImportError as exc:\n'
+            '        bad[name] = str(exc)\n'
+            'print(json.dumps({"n": len(names), "bad": bad}))\n')
+    res = subprocess.run([sys.executable, '-c', code, str(REPO / 'ssm_localization')],
+                         capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout.splitlines()[-1])
+    assert out['n'] > 100 and out['bad'] == {}

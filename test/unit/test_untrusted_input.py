@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from ssm_localization import (build_index, GlobalLocalizer, occupancy_map_from_msg,
                               OccupancyMap, read_bag, save_index, save_map_yaml, write_bag)
-from ssm_localization.cli import main
+from ssm_localization.cli.main import main
 from ssm_localization.mapping.map_io import load_map_yaml
 from ssm_localization.transforms import (planar_yaw, quaternion_tilt, quaternion_to_yaw,
                                          unit_quaternion)
