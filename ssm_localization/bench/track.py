@@ -16,7 +16,8 @@ scans, global relocalizations included; and the tracked scans alone), then the t
 ``--random-kidnaps N`` adds N random kidnaps per log (seeded): five scans tracked before, four
 after a jump of at least 1 m anywhere in the log, the same odometry step across it; it counts the
 wrong ``ok`` answers after the kidnap and the scans to recovery (the protocol has only two
-kidnaps per log). ``--single`` adds single-scan global localization of the same scans (how often
+kidnaps per log); with ``--max-range R`` the same kidnaps are tracked again with the laser
+limited to R metres. ``--single`` adds single-scan global localization of the same scans (how often
 a scan alone is not ``ok`` and how often the tracker is right there: the corridors),
 ``--no-odom`` tracking without odometry, ``--max-range R`` also tracks the real sequence with
 every reading beyond R metres made a no-return (a short laser: long corridors a single scan
@@ -80,7 +81,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='also track the real sequence and its two-kidnap sequence with the '
                         'laser limited to R metres')
     parser.add_argument('--random-kidnaps', type=nonnegative_int, default=0, metavar='N',
-                        help='also N random kidnaps per log (wrong ok after them, recovery)')
+                        help='also N random kidnaps per log (wrong ok after them, recovery); '
+                        'with --max-range, the same kidnaps with the short laser too')
     parser.add_argument('--seed', type=nonnegative_int, default=1,
                         help='seed of the random kidnaps')
     parser.add_argument('--data', default=None, help=DATA_HELP)
@@ -134,8 +136,12 @@ def _single(localizer: GlobalLocalizer, seq: ScanSequence, tracked) -> str:
 
 
 def random_kidnaps(localizer: GlobalLocalizer, config, seq: ScanSequence, count: int,
-                   seed: int) -> str:
-    """Track ``count`` random kidnaps of ``seq`` (see the module doc); one line of figures."""
+                   seed: int, label: str = '') -> str:
+    """
+    Track ``count`` random kidnaps of ``seq`` (see the module doc); one line of figures.
+
+    ``label`` follows "random kidnaps" in the line (the sensor, when the scans are limited).
+    """
     rng = np.random.default_rng(seed)
     truth = np.array(seq.truth)
     wrong, recoveries = 0, []
@@ -156,7 +162,7 @@ def random_kidnaps(localizer: GlobalLocalizer, config, seq: ScanSequence, count:
         recoveries.append(ts.recoveries[0].scans)
     counts = Counter('never' if r is None else str(r) for r in recoveries)
     within = sum(r is not None and r <= TARGET_FIX_SCANS for r in recoveries)
-    return (f'  random kidnaps: {count}, wrong ok after them {wrong}, recovered within '
+    return (f'  random kidnaps{label}: {count}, wrong ok after them {wrong}, recovered within '
             f'{TARGET_FIX_SCANS} scans {within}/{count} (scans: '
             + ', '.join(f'{k}: {v}' for k, v in sorted(counts.items())) + ')')
 
@@ -201,6 +207,10 @@ def run(args: argparse.Namespace) -> int:
         if args.random_kidnaps > 0:
             print(random_kidnaps(localizer, track_cfg, real, args.random_kidnaps, args.seed),
                   flush=True)
+            if args.max_range > 0:      # the same kidnaps seen by the short laser
+                print(random_kidnaps(localizer, track_cfg, real.limited(args.max_range),
+                                     args.random_kidnaps, args.seed,
+                                     f' at {args.max_range:g} m'), flush=True)
         print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
     tables, text = reliability_report(graded, "reliability of the tracker's confidence")
     if text:

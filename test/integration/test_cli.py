@@ -269,6 +269,19 @@ def test_replay_track_refuses_bad_tracker_params(intel_track, tmp_path, capsys):
     assert rc == 2 and 'odom_alphas' in err, err
 
 
+def test_bench_track_kidnaps_the_short_laser_too(tmp_path, capsys):
+    data = shared_data()
+    shared_data('carmen', 'aces-corrected.log.gz')
+    rc = main(['bench', 'track', '--sets', 'aces', '--scans', '40', '--data', str(data),
+               '--work', str(tmp_path / 'work'), '--max-range', '3.5', '--random-kidnaps', '2'])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert [ln.split(':')[0] for ln in out.splitlines() if 'random kidnaps' in ln] == [
+        '  random kidnaps', '  random kidnaps at 3.5 m'], out
+    for line in (ln for ln in out.splitlines() if 'random kidnaps' in ln):
+        assert re.search(r': 2, wrong ok after them \d+, recovered within 3 scans \d/2', line)
+
+
 def test_bench_track_prints_both_sequences_and_the_targets(tmp_path, capsys):
     data = shared_data()
     shared_data('carmen', 'aces-corrected.log.gz')
