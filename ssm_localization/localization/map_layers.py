@@ -57,7 +57,7 @@ def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
         surface = SurfaceModel.from_occupancy(m.occupied_mask(thresh), m.resolution, m.origin,
                                               cfg.surface_depth, reach=reach)
     with layer(LAYER_NAMES[2]):
-        caster = RayCaster(m.occupied_mask(thresh), m.resolution, m.origin)
+        caster = index.ray_caster()     # the virtual scans' when the index was built here
     with layer(LAYER_NAMES[3]):
         voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw,
                             search_dims=cfg.vote_descriptor_dims)

@@ -75,6 +75,26 @@ class MapIndex:
     def kind_counts(self) -> dict[str, int]:
         return count_kinds(self.node_kind)
 
+    def ray_caster(self) -> RayCaster:
+        """
+        Return the ray caster of ``map`` (its cells occupied from ``config.occupied_thresh``).
+
+        The one :func:`build_index` cast the virtual scans with, when this index was built in
+        this process (the localizer's beam check casts on the same cells, so it is built once:
+        2 s of a 30 M-cell map's start-up); otherwise built on first use and kept. Not stored in
+        the file, not copied by ``dataclasses.replace`` (another map may come with the copy).
+        """
+        caster = self.__dict__.get('_caster')
+        if caster is None:
+            caster = _ray_caster(self.map, self.config)
+            object.__setattr__(self, '_caster', caster)
+        return caster
+
+
+def _ray_caster(occ_map: OccupancyMap, cfg: IndexConfig) -> RayCaster:
+    return RayCaster(occ_map.occupied_mask(cfg.occupied_thresh), occ_map.resolution,
+                     occ_map.origin)
+
 
 #: names of the layers :func:`build_index` builds, in order
 INDEX_LAYERS = ('topology', 'virtual scans', 'features')
@@ -110,14 +130,12 @@ def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
         poses = np.array([compose((float(x), float(y), 0.0), cfg.sensor_pose)
                           for x, y in node_xy], dtype=float).reshape(-1, 3)
         angles = _beam_angles(cfg.beams)
-        caster = RayCaster(occ_map.occupied_mask(cfg.occupied_thresh), occ_map.resolution,
-                           occ_map.origin)
+        caster = _ray_caster(occ_map, cfg)
         ranges = np.full((k, len(angles)), np.inf)
         chunk = 128
         for s in range(0, k, chunk):
             report(s, k, 'virtual scans', 30, 60)
             ranges[s:s + chunk] = caster.cast(poses[s:s + chunk], angles, cfg.max_range)
-        del caster
     with layer(INDEX_LAYERS[2]):
         cos, sin = np.cos(angles), np.sin(angles)
         features = []
@@ -130,11 +148,13 @@ def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
             # paper's pipeline, matched without ICP; it was a third of this stage's time
             features.append(prepare_scan(pts, cfg.matcher, fine=False))
     report(k, k, 'done')
-    return MapIndex(map=occ_map, node_xy=node_xy, node_kind=node_kind,
-                    node_sensor_pose=poses, ranges=ranges, beam_angles=angles,
-                    features=features, gvd_mask=gvd_mask, config=cfg,
-                    map_checksum=occ_map.checksum(), version=FORMAT_VERSION,
-                    edges=edges, node_clearance=node_clearance)
+    index = MapIndex(map=occ_map, node_xy=node_xy, node_kind=node_kind,
+                     node_sensor_pose=poses, ranges=ranges, beam_angles=angles,
+                     features=features, gvd_mask=gvd_mask, config=cfg,
+                     map_checksum=occ_map.checksum(), version=FORMAT_VERSION,
+                     edges=edges, node_clearance=node_clearance)
+    object.__setattr__(index, '_caster', caster)    # the localizer's beam check casts with it
+    return index
 
 
 # --------------------------------------------------------------------------- npz storage

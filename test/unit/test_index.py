@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import io
 import math
 from pathlib import Path
@@ -105,6 +106,22 @@ def test_save_load_round_trip(built, tmp_path):
     for a, b in zip(back.features, index.features):
         for key, arr in a.to_arrays().items():
             assert np.array_equal(arr, b.to_arrays()[key]), key
+
+
+def test_the_ray_caster_of_the_virtual_scans_is_kept_for_the_localizer(built, tmp_path):
+    index, _ = built
+    assert index.ray_caster() is index.ray_caster()
+    poses, angles = index.node_sensor_pose[:5], index.beam_angles
+    ranges = index.ray_caster().cast(poses, angles, index.config.max_range)
+    assert np.array_equal(ranges, index.ranges[:5])         # the one the scans were cast with
+    # a loaded index, or a copy (maybe of another map), builds its own, casting the same
+    back = load_index(save_index(index, tmp_path / 'idx.npz'), expected_map=_rooms())
+    copy = dataclasses.replace(index, map=_rooms(extra=True))
+    for other in (back, copy):
+        assert other.ray_caster() is not index.ray_caster()
+        assert other.ray_caster() is other.ray_caster()
+    assert np.array_equal(back.ray_caster().cast(poses, angles, 12.0), ranges)
+    assert not np.array_equal(copy.ray_caster().cast(poses, angles, 12.0), ranges)
 
 
 def test_file_holds_no_pickles(built, tmp_path):
@@ -318,8 +335,11 @@ def test_layers_are_reported_in_order_with_their_memory():
     localizer = GlobalLocalizer(index, layer=meter)
     assert [c.name for c in meter.costs] == list(INDEX_LAYERS) + list(LAYER_NAMES)
     kept = {c.name: c.kept for c in meter.costs}
-    assert kept['ray caster'] >= localizer.caster._code.nbytes
+    # the virtual scans' caster is the localizer's: kept by that layer, not built again
+    assert localizer.caster is index.ray_caster()
+    assert kept['virtual scans'] >= localizer.caster._code.nbytes > kept['ray caster']
     assert kept['wall surface'] >= localizer.surface.codes.nbytes
-    assert all(c.peak >= c.kept >= 0 and c.seconds >= 0 for c in meter.costs)
+    # (a layer that builds nothing may free a few bytes of the one before)
+    assert all(c.peak >= c.kept > -4096 and c.peak >= 0 and c.seconds >= 0 for c in meter.costs)
     table = format_layers(meter.as_dicts(), index.map.data.size)
     assert 'correlative grid' in table and 'all layers kept' in table
