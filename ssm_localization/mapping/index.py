@@ -102,12 +102,15 @@ INDEX_LAYERS = ('topology', 'virtual scans', 'features')
 
 def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
                 progress: ProgressCallback | None = None,
-                layer: LayerHook = no_layers) -> MapIndex:
+                layer: LayerHook = no_layers, keep_caster: bool = True) -> MapIndex:
     """
     Nodes, virtual scans and their matcher features for ``occ_map`` (paper section III).
 
     ``layer`` is told when each of :data:`INDEX_LAYERS` is built (``bench index`` measures
     their memory); the intermediates of each are released before the next starts.
+    ``keep_caster``: keep the ray caster of the virtual scans for a localizer built on the index
+    in this process (:meth:`MapIndex.ray_caster`; 2 bytes a cell), or drop it (an index that is
+    only saved or published).
     """
     cfg = config or IndexConfig()
     if not isinstance(occ_map, OccupancyMap):
@@ -153,7 +156,8 @@ def build_index(occ_map: OccupancyMap, config: IndexConfig | None = None,
                      features=features, gvd_mask=gvd_mask, config=cfg,
                      map_checksum=occ_map.checksum(), version=FORMAT_VERSION,
                      edges=edges, node_clearance=node_clearance)
-    object.__setattr__(index, '_caster', caster)    # the localizer's beam check casts with it
+    if keep_caster:
+        object.__setattr__(index, '_caster', caster)    # the localizer's beam check casts with it
     return index
 
 

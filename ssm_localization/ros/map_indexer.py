@@ -132,7 +132,9 @@ class MapIndexerNode(LifecycleNode):
         label = map_label(occ, checksum)
         self.get_logger().info(f'{label}: indexing')
         cfg = self.index_config
-        self.builder.submit(BuildJob(label, partial(build_index, occ, cfg)))
+        # the index is published and saved here, not localized on: no ray caster kept
+        self.builder.submit(BuildJob(label, partial(build_index, occ, cfg,
+                                                    keep_caster=False)))
 
     def _publish(self, index) -> None:
         frame = getattr(index.map, 'frame_id', 'map') or 'map'

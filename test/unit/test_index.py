@@ -122,6 +122,9 @@ def test_the_ray_caster_of_the_virtual_scans_is_kept_for_the_localizer(built, tm
         assert other.ray_caster() is other.ray_caster()
     assert np.array_equal(back.ray_caster().cast(poses, angles, 12.0), ranges)
     assert not np.array_equal(copy.ray_caster().cast(poses, angles, 12.0), ranges)
+    # an index only saved or published (the map_indexer node) keeps none
+    lean = build_index(_rooms(), index.config, keep_caster=False)
+    assert '_caster' not in vars(lean) and np.array_equal(lean.ranges, index.ranges)
 
 
 def test_file_holds_no_pickles(built, tmp_path):
