@@ -118,12 +118,12 @@ def test_map_indexer_newer_map_aborts_running_build(ros, monkeypatch, capfd):
     real_build = map_indexer.build_index
     started = []
 
-    def slow_build(occ, config=None, progress=None):
+    def slow_build(occ, config=None, progress=None, **kwargs):
         started.append(occ)
         for i in range(10):
             time.sleep(0.1)
             progress(i, 100, 'slow test build')
-        return real_build(occ, config, progress)
+        return real_build(occ, config, progress, **kwargs)
     monkeypatch.setattr(map_indexer, 'build_index', slow_build)
     node = ros.add(MapIndexerNode(context=ros.context))
     got = ros.collect(MarkerArray, 'topological_map', LATCHED_QOS)
