@@ -38,10 +38,10 @@ _ZSTD_MAGIC = b'\x28\xb5\x2f\xfd'
 def check_bag_files(files: list[Path], file_compressed: bool) -> None:
     """Refuse what would block, or expand without bound, once ``rosbags`` opens ``files``."""
     for path in files:
-        if path.exists() and not path.is_file():
-            raise BagError(f'{path}: not a regular file (a FIFO or a device would block)')
         if not path.exists():
             continue                # rosbags names the missing file
+        if not path.is_file():
+            raise BagError(f'{path}: not a regular file (a FIFO or a device would block)')
         if file_compressed or path.suffix == '.zstd':
             check_compressed_file(path)
         elif path.suffix == '.mcap':

@@ -109,10 +109,9 @@ def check_declared(declared: Declared) -> tuple[int, int]:
                          'rebuild the index')
     allowed = {*SCALARS, 'map_data', 'gvd_mask', 'map_origin', 'node_xy', 'beam_angles',
                'node_kind', 'node_sensor_pose', 'node_clearance', 'ranges', 'edges',
-               'feature_fields'}
+               'feature_fields', *wanted}
     for name, tail in FEATURE_TAILS.items():
         key = f'{FEATURE_PREFIX}{name}'
-        allowed |= {key, f'{key}__offsets'}
         expect(f'{key}__offsets', (k + 1,))
         got = shape(key)
         width_ok = got == (0,) or (len(got) == 1 + len(tail)       # (0,): an empty index's
