@@ -20,17 +20,9 @@ They run in one thread (``nogil``, no ``parallel``): the package's thread policy
 """
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
-try:
-    import numba
-except ImportError:                     # the callers' numpy code runs instead
-    numba = None
-    warnings.warn('numba is not installed (a requirement of ssm_localization): the correlative '
-                  'search and the refinement run in numpy, about a quarter slower on large maps',
-                  RuntimeWarning, stacklevel=2)
+from ..compiled import compile_loop
 
 
 def window_sums_python(grid: np.ndarray, base: np.ndarray, yaw: np.ndarray, cell: np.ndarray,
@@ -59,20 +51,8 @@ def window_sums_python(grid: np.ndarray, base: np.ndarray, yaw: np.ndarray, cell
         out[w] = total
 
 
-def _compile(function):
-    """Return ``function`` compiled by numba (cached on disk where it can be), or None."""
-    if numba is None:
-        return None
-    try:
-        return numba.njit(cache=True, nogil=True)(function)
-    except RuntimeError as err:         # no writable cache directory: compile in each process
-        warnings.warn(f'numba cannot cache {function.__name__} ({err}); compiling without cache',
-                      RuntimeWarning, stacklevel=2)
-        return numba.njit(nogil=True)(function)
-
-
 #: the compiled :func:`window_sums_python`, or None without numba
-window_sums = _compile(window_sums_python)
+window_sums = compile_loop(window_sums_python)
 
 
 def normal_equations_python(x: np.ndarray, delta: np.ndarray, pts: np.ndarray,
@@ -144,7 +124,7 @@ def normal_equations_python(x: np.ndarray, delta: np.ndarray, pts: np.ndarray,
 
 
 #: the compiled :func:`normal_equations_python`, or None without numba
-normal_equations = _compile(normal_equations_python)
+normal_equations = compile_loop(normal_equations_python)
 
 
 def warm_up() -> None:

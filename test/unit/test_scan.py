@@ -5,6 +5,7 @@ from helpers import room_scan
 import numpy as np
 import pytest
 from ssm_localization import MatcherConfig
+from ssm_localization.matching import kernels, scan
 from ssm_localization.matching.descriptors import candidates, shape_context
 from ssm_localization.matching.features import prepare_scan, ScanFeatures
 from ssm_localization.matching.pairwise import (affinity_matrix, angle_table, deformation,
@@ -87,6 +88,28 @@ def test_downsample_small_inputs():
     assert downsample_even(np.zeros((0, 2)), 10).tolist() == []
     assert downsample_even(np.ones((2, 2)), 10).tolist() == [0, 1]
     assert len(downsample_even(np.ones((50, 2)), 10)) == 1     # all points identical
+
+
+def test_the_compiled_voxel_selection_equals_its_source_and_numpy(monkeypatch):
+    """The same indices three ways: ties (repeated points) to the lower index, any cell size."""
+    assert kernels.voxel_select is not None, 'numba is a requirement (requirements.txt)'
+    rng = np.random.default_rng(11)
+    clouds = [room_scan((0.3, -0.2, 0.4), n_beams=360), rng.normal(0.0, 3.0, (500, 2)),
+              np.repeat(rng.uniform(-2.0, 2.0, (40, 2)), 3, axis=0)[rng.permutation(120)],
+              np.array([[0.25, -7.5]]), np.ones((9, 2))]
+    compiled = []
+    for pts in clouds:
+        for cell in (0.01, 0.05, 0.137, 0.5, 3.0):
+            compiled.append(scan._voxel_select(pts, cell))
+            assert np.array_equal(compiled[-1], kernels.voxel_select_python(pts, cell))
+    monkeypatch.setattr(kernels, 'voxel_select', None)       # scan.py's numpy form
+    plain = [scan._voxel_select(pts, cell) for pts in clouds for cell in (0.01, 0.05, 0.137,
+                                                                          0.5, 3.0)]
+    assert all(np.array_equal(a, b) for a, b in zip(compiled, plain))
+    assert [len(a) for a in plain[10:15]] != [120] * 5 and len(plain[-1]) == 1
+    # the cell's point nearest its centroid is kept
+    pts = np.array([[0.1, 0.1], [0.5, 0.5], [0.45, 0.52], [0.9, 0.9], [1.5, 0.2]])
+    assert scan._voxel_select(pts, 1.0).tolist() == [1, 4]     # centroid (0.49, 0.51)
 
 
 # ---------------------------------------------------------------- tangents (eq. 1)
