@@ -13,6 +13,7 @@ output paths before they start working.
 from __future__ import annotations
 
 import argparse
+from importlib import metadata
 import sys
 
 from . import bench_cmd, carmen_cmd, index_cmd, match_cmd, play_cmd, replay_cmd, simulate_cmd
@@ -55,10 +56,19 @@ def error_text(exc: BaseException) -> str:
     return clip(text, MAX_ERROR_CHARS)
 
 
+def _version() -> str:
+    """Return the installed version (setup.py's, as ``ssm_localization.__version__``)."""
+    try:
+        return metadata.version('ssm_localization')
+    except metadata.PackageNotFoundError:      # run from a source tree that is not installed
+        return 'unknown (not installed)'
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog='ssm_localization',
         description='Single-scan global localization with spectral scan matching.')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {_version()}')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     for name, (mod, help_text) in COMMANDS.items():
         sp = sub.add_parser(name, help=help_text, description=help_text)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -157,6 +158,20 @@ def test_the_installed_console_scripts_go_through_the_wrapper():
         'ssm_localization': 'ssm_localization.entry_points:ssm_localization',
         'global_localizer': 'ssm_localization.entry_points:global_localizer',
         'map_indexer': 'ssm_localization.entry_points:map_indexer'}
+
+
+def test_python_dash_m_runs_the_command_line_and_the_versions_agree():
+    """``python -m ssm_localization`` is the console script; package.xml, setup.py agree."""
+    res = subprocess.run([sys.executable, '-m', 'ssm_localization', '--version'],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == f'ssm_localization {ssm_localization.__version__}'
+    xml = re.findall(r'<version>([^<]+)</version>', (REPO / 'package.xml').read_text())
+    setup = re.findall(r"version='([^']+)'", (REPO / 'setup.py').read_text())
+    assert xml == setup == [ssm_localization.__version__]
+    res = subprocess.run([sys.executable, '-m', 'ssm_localization'], capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 2 and 'required: COMMAND' in res.stderr and not res.stdout
 
 
 def test_every_module_imports_on_its_own():

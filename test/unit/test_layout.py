@@ -37,7 +37,7 @@ LAYERS = [
     {'mapping'},
     {'localization', 'io'},
     {'evaluation'},
-    {'cli', 'bench', 'ros', 'demo', 'entry_points', '__init__'},
+    {'cli', 'bench', 'ros', 'demo', 'entry_points', '__init__', '__main__'},
 ]
 TOP = len(LAYERS) - 1
 
