@@ -50,13 +50,20 @@ class LayerMeter:
         return [c.__dict__.copy() for c in self.costs]
 
 
-def format_layers(costs: list[dict], cells: int) -> str:
-    """Return a table of layer costs: MB kept, bytes per map cell, MB peak, seconds."""
+def format_layers(costs: list[dict], cells: int, notes: dict[str, str] | None = None) -> str:
+    """
+    Return a table of layer costs: MB kept, bytes per map cell, MB peak, seconds.
+
+    ``notes``: a remark after a layer's row, by layer name (a layer counted with another).
+    """
+    notes = notes or {}
     lines = [f'  {"layer":18s} {"kept MB":>8s} {"B/cell":>7s} {"peak MB":>8s} '
              f'{"B/cell":>7s} {"s":>6s}']
     for c in costs:
+        note = f'  ({notes[c["name"]]})' if c['name'] in notes else ''
         lines.append(f'  {c["name"]:18s} {c["kept"] / 1e6:8.1f} {c["kept"] / cells:7.2f} '
-                     f'{c["peak"] / 1e6:8.1f} {c["peak"] / cells:7.2f} {c["seconds"]:6.2f}')
+                     f'{c["peak"] / 1e6:8.1f} {c["peak"] / cells:7.2f} {c["seconds"]:6.2f}'
+                     f'{note}')
     kept = sum(c['kept'] for c in costs)
     lines.append(f'  {"all layers kept":18s} {kept / 1e6:8.1f} {kept / cells:7.2f}')
     return '\n'.join(lines)

@@ -344,5 +344,7 @@ def test_layers_are_reported_in_order_with_their_memory():
     assert kept['wall surface'] >= localizer.surface.codes.nbytes
     # (a layer that builds nothing may free a few bytes of the one before)
     assert all(c.peak >= c.kept > -4096 and c.peak >= 0 and c.seconds >= 0 for c in meter.costs)
-    table = format_layers(meter.as_dicts(), index.map.data.size)
+    table = format_layers(meter.as_dicts(), index.map.data.size, {'ray caster': 'shared'})
     assert 'correlative grid' in table and 'all layers kept' in table
+    assert [line.endswith('(shared)') for line in table.splitlines()] == [
+        name == 'ray caster' for name in ['header', *INDEX_LAYERS, *LAYER_NAMES, 'all']]
