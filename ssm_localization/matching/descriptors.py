@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import kernels
+
 
 def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radial_bins: int,
                   angular_bins: int, context: np.ndarray | None = None,
@@ -38,6 +40,15 @@ def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radia
         dy = ctx[None, :, 1] - points[:, None, 1]
     else:
         dx, dy = offsets
+    if kernels.shape_context_histograms is not None and dx.shape[1] > 0:
+        # one compiled pass (kernels.py): the same histograms up to the last bit of an angle
+        h = np.empty((n, nb))
+        kernels.shape_context_histograms(
+            np.ascontiguousarray(dx, dtype=np.float64), np.ascontiguousarray(dy, dtype=np.float64),
+            np.ascontiguousarray(tangents, dtype=np.float64),
+            np.ones(dx.shape[1]) if weights is None else np.ascontiguousarray(weights, np.float64),
+            float(radius), int(radial_bins), int(angular_bins), h)
+        return _normalised(h)
     d2 = dx * dx + dy * dy
     ii, jj = np.nonzero((d2 > 0.0) & (d2 < radius * radius))
     ex = dx[ii, jj]
@@ -58,7 +69,11 @@ def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radia
     cw = 1.0 if weights is None else weights[jj]
     h = np.bincount(base + a0, weights=(1.0 - w1) * cw, minlength=n * nb)
     h += np.bincount(base + a1, weights=w1 * cw, minlength=n * nb)
-    h = h.reshape(n, nb)
+    return _normalised(h.reshape(n, nb))
+
+
+def _normalised(h: np.ndarray) -> np.ndarray:
+    """Hellinger-normalise histograms (N, B): the square roots of each row's shares, float32."""
     s = h.sum(axis=1, keepdims=True)
     h = np.sqrt(h / np.where(s > 0.0, s, 1.0))
     return h.astype(np.float32)

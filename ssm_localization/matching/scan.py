@@ -300,21 +300,32 @@ def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
         dy = context[None, :, 1] - p[:, None, 1]
     else:
         dx, dy = offsets
-    d2 = dx * dx + dy * dy
     # radius grown to the min_neighbours-th nearest context point (sparse, grazing walls)
-    kk = min(min_neighbours, d2.shape[1]) - 1
-    r2 = np.full(n, radius * radius)
-    if kk >= 1:
-        kth = np.partition(d2, kk, axis=1)[:, kk]
-        r2 = np.clip(kth * 1.0001, radius * radius, max_radius * max_radius)
-    m = (d2 <= r2[:, None]).astype(float)
-    cnt = m.sum(axis=1)
+    kk = min(min_neighbours, dx.shape[1]) - 1
+    if kernels.neighbourhood_moments is not None and dx.shape[1] > 0:
+        # one compiled pass, the same sums (kernels.py)
+        sums = np.empty((n, 6))
+        kernels.neighbourhood_moments(np.ascontiguousarray(dx, dtype=np.float64),
+                                      np.ascontiguousarray(dy, dtype=np.float64), kk,
+                                      radius * radius, max_radius * max_radius, sums)
+        cnt, sx, sy, sxx, sxy, syy = sums.T
+    else:
+        d2 = dx * dx + dy * dy
+        r2 = np.full(n, radius * radius)
+        if kk >= 1:
+            kth = np.partition(d2, kk, axis=1)[:, kk]
+            r2 = np.clip(kth * 1.0001, radius * radius, max_radius * max_radius)
+        m = (d2 <= r2[:, None]).astype(float)
+        cnt = m.sum(axis=1)
+        sx, sy = (m * dx).sum(axis=1), (m * dy).sum(axis=1)
+        sxx, sxy, syy = (m * dx * dx).sum(axis=1), (m * dx * dy).sum(axis=1), \
+            (m * dy * dy).sum(axis=1)
     c = np.maximum(cnt, 1.0)
-    mx = (m * dx).sum(axis=1) / c
-    my = (m * dy).sum(axis=1) / c
-    cxx = (m * dx * dx).sum(axis=1) / c - mx * mx
-    cxy = (m * dx * dy).sum(axis=1) / c - mx * my
-    cyy = (m * dy * dy).sum(axis=1) / c - my * my
+    mx = sx / c
+    my = sy / c
+    cxx = sxx / c - mx * mx
+    cxy = sxy / c - mx * my
+    cyy = syy / c - my * my
     u = principal_axes(cxx, cxy, cyy)[1]
     sweep = np.column_stack((-p[:, 1], p[:, 0]))
     bad = (cnt < 2) | ((cxx + cyy) <= 0.0)

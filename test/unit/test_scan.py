@@ -112,6 +112,66 @@ def test_the_compiled_voxel_selection_equals_its_source_and_numpy(monkeypatch):
     assert scan._voxel_select(pts, 1.0).tolist() == [1, 4]     # centroid (0.49, 0.51)
 
 
+def test_the_compiled_pairwise_sum_is_numpys_row_sum():
+    """Rows of every length to 600 (and two longer), summed as ``np.sum(axis=1)`` sums them."""
+    assert kernels.pairwise_sum is not None, 'numba is a requirement (requirements.txt)'
+    rng = np.random.default_rng(2)
+    tasks, partial = np.empty((128, 2), np.int64), np.empty(64)
+    for length in [*range(1, 601), 1000, 4099]:
+        rows = rng.normal(size=(3, length)) * np.exp(4.0 * rng.normal(size=(3, length)))
+        rows[rng.random(rows.shape) < 0.4] = 0.0
+        want = rows.sum(axis=1)
+        for r in range(3):
+            assert kernels.pairwise_sum(rows[r], length, tasks, partial) == want[r], length
+            if length in (1, 7, 8, 129, 600):
+                assert kernels.pairwise_sum_python(rows[r], length, tasks, partial) == want[r]
+
+
+def _compiled_and_numpy(name, call):
+    """``call()`` with the compiled kernel ``name``, with its Python source, and with numpy."""
+    compiled = getattr(kernels, name)
+    assert compiled is not None, 'numba is a requirement (requirements.txt)'
+    with pytest.MonkeyPatch.context() as mp:
+        first = call()
+        mp.setattr(kernels, name, getattr(kernels, f'{name}_python'))
+        source = call()
+        mp.setattr(kernels, name, None)
+        plain = call()
+    assert getattr(kernels, name) is compiled
+    return first, source, plain
+
+
+def test_the_compiled_tangents_and_descriptors_equal_numpys():
+    """
+    robust_tangents and shape_context: the same arrays with the compiled loops as with numpy.
+
+    The neighbourhood sums bit for bit; a descriptor's angle is numba's ``atan2`` where numpy
+    has its own, so the float64 histograms may differ in a last bit (not one of these does).
+    """
+    rng = np.random.default_rng(4)
+    cfg = MatcherConfig()
+    for k, pose in enumerate([(0.3, 0.1, 0.2), (-1.2, 0.7, 2.0), (2.0, -1.5, -1.0)]):
+        pts = room_scan(pose, n_beams=360)
+        if k == 2:                                   # clutter and a ragged context
+            pts = np.vstack((pts, rng.uniform(-3.0, 3.0, (40, 2))))
+        ctx = pts[downsample_even(pts, 4 * cfg.max_points, cfg.context_spacing)]
+        sel = pts[downsample_even(pts, cfg.max_points, cfg.min_spacing)]
+        three = _compiled_and_numpy('neighbourhood_moments',
+                                    lambda: robust_tangents(sel, ctx, 0.3))
+        assert np.array_equal(three[0], three[2]) and np.array_equal(three[1], three[2])
+        u = three[0]
+        w = rng.uniform(0.05, 0.3, len(ctx)) if k == 1 else None
+        three = _compiled_and_numpy('shape_context_histograms',
+                                    lambda: shape_context(sel, u, 1.5, 4, 12, context=ctx,
+                                                          weights=w))
+        assert three[0].dtype == three[2].dtype == np.float32
+        assert np.array_equal(three[0], three[1]) and np.array_equal(three[0], three[2])
+    # one context point only: no neighbours, the sweep direction (both ways alike)
+    one = _compiled_and_numpy('neighbourhood_moments',
+                              lambda: robust_tangents(sel[:5], ctx[:1], 0.3))
+    assert np.array_equal(one[0], one[2]) and np.array_equal(one[1], one[2])
+
+
 # ---------------------------------------------------------------- tangents (eq. 1)
 def test_tangents_eq1_line_gap_and_ends():
     x = np.r_[np.linspace(0, 1, 6), np.linspace(3, 4, 6)]
