@@ -14,6 +14,9 @@ among nine buildings' worth of candidates, and telling the buildings apart.
 
 ``office_30m``: the synthetic office of ``bench index`` grown to 274 m x 274 m (5480 x 5480 =
 30 M cells), a worst case of dense, repetitive structure (corridors, rows of similar rooms).
+``outdoor_30m``: a synthetic campus with outdoor parts, 270 m x 270 m (5400 x 5400 = 29 M
+cells): buildings of rooms of random sizes among trees, posts, benches, fences and parked cars,
+open ground far from all of them unknown (``synthetic.outdoor_map``).
 """
 from __future__ import annotations
 
@@ -26,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .places import odd_scans, REAL_PLACES, sim_queries
-from .synthetic import office_map
+from .synthetic import office_map, outdoor_map
 from ..io.bag_records import ScanRecord
 from ..io.bag_writer import write_bag
 from ..io.carmen import build_map, CarmenLog, read_carmen_log
@@ -50,6 +53,8 @@ SITES: tuple[tuple[str, float], ...] = (
 CAMPUS_VERSION = 1
 #: side of the synthetic office, metres (5480 x 5480 cells at 0.05 m)
 OFFICE_30M_SIZE = 274.0
+#: side of ``outdoor_30m``, metres (5400 cells at 0.05 m)
+OUTDOOR_30M_SIZE = 270.0
 
 
 @dataclass(frozen=True)
@@ -207,6 +212,11 @@ def site_queries(data: Path, site: Site, count: int, seed: int) -> SiteQueries:
 def office_30m() -> OccupancyMap:
     """Return the synthetic 30 M-cell office (5480 x 5480 cells, seed 0)."""
     return office_map(size=OFFICE_30M_SIZE)
+
+
+def outdoor_30m() -> OccupancyMap:
+    """Return the synthetic 29 M-cell campus with outdoor parts (5400 x 5400 cells, seed 0)."""
+    return outdoor_map(size=OUTDOOR_30M_SIZE)
 
 
 def write_query_bag(path: Path, grid: OccupancyMap, queries: list[SiteQueries],

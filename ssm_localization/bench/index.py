@@ -13,9 +13,10 @@ Maps: the shared nav2 maps, maps built from the shared CARMEN logs (when present
 ``io.carmen.build_map`` with its defaults, saved as YAML+PGM in a temporary directory), any
 ``--extra MAP.yaml``, a deterministic synthetic 100 m x 100 m office at 0.05 m (2000 x 2000);
 ``--campus`` adds the campus of ``bench/campus.py`` (the six real buildings and three simulated
-maps on one 27.6 M-cell grid) and the synthetic 274 m office (30 M cells).
+maps on one 27.6 M-cell grid), the synthetic 274 m office (30 M cells) and the synthetic 270 m
+outdoor campus (29 M cells, ``synthetic.outdoor_map``).
 Targets (2-core machine): depot / turtlebot3_world < 1 s; the office < 10 s and < 1 GB; the
-campus and the 30 M-cell office: index < 30 s, whole process < 2 GB.
+campus and the two synthetic 30 M-cell maps: index < 30 s, whole process < 2 GB.
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ import sys
 import tempfile
 import time
 
-from .campus import campus_map, office_30m
+from .campus import campus_map, office_30m, outdoor_30m
 from .data import data_dir, DATA_HELP
 from .memory import format_layers, LayerMeter
 from .synthetic import office_map
@@ -42,11 +43,12 @@ __all__ = ['add_arguments', 'run']
 
 #: (index build s, whole-process peak MB) targets by map name
 TARGETS = {'depot': (1.0, None), 'turtlebot3_world': (1.0, None), 'office': (10.0, 1024.0),
-           'campus': (30.0, 2048.0), 'office_30m': (30.0, 2048.0)}
+           'campus': (30.0, 2048.0), 'office_30m': (30.0, 2048.0),
+           'outdoor_30m': (30.0, 2048.0)}
 #: layers built once and counted with another (the localizer's ray caster is the virtual scans')
 SHARED_LAYERS = {'ray caster': 'the caster of the virtual scans, counted there'}
 #: map specs that are not YAML files: the synthetic offices, the campus (``campus:DATA:WORK``)
-SYNTHETIC = {'office': office_map, 'office_30m': office_30m}
+SYNTHETIC = {'office': office_map, 'office_30m': office_30m, 'outdoor_30m': outdoor_30m}
 
 
 def _load(spec: str) -> OccupancyMap:
@@ -120,9 +122,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help='skip the synthetic 2000 x 2000 office map')
     parser.add_argument('--campus', action='store_true',
                         help='also the campus (27.6 M cells: the six real buildings and three '
-                             'simulated maps, bench/campus.py) and the 30 M-cell synthetic office')
+                             'simulated maps, bench/campus.py), the 30 M-cell synthetic office '
+                             'and the 29 M-cell synthetic outdoor campus')
     parser.add_argument('--only-campus', action='store_true',
-                        help='only the campus and the 30 M-cell office')
+                        help='only the campus and the two synthetic 30 M-cell maps')
     parser.add_argument('--no-layers', action='store_true',
                         help='skip the per-layer memory breakdown (a second, traced build)')
     parser.add_argument('--repeat', type=positive_int, default=1,
@@ -169,6 +172,7 @@ def _specs(args: argparse.Namespace, shared: Path | None, tmp: Path) -> list[tup
         campus_map(shared, work)        # built and cached here, not in the timed worker
         specs.append(('campus', f'campus:{shared}:{work}'))
         specs.append(('office_30m', 'office_30m'))
+        specs.append(('outdoor_30m', 'outdoor_30m'))
     return specs
 
 

@@ -14,7 +14,8 @@ Data sets (``--sets``):
 - ``campus`` (``--campus``): the six real buildings and three simulated maps on one 27.6 M-cell
   grid (``bench/campus.py``), ``--campus-n`` queries of each building (its odd-numbered scans /
   random poses), one line per building and the campus pooled; ``office_30m`` (``--campus``):
-  the synthetic office grown to 30 M cells, ``-n`` random poses.
+  the synthetic office grown to 30 M cells, ``-n`` random poses; ``outdoor_30m`` (``--campus``):
+  a synthetic campus with outdoor parts, 29 M cells, ``-n`` random poses.
 Every set runs with the same defaults (no per-set parameter). The ``TUNING_SETS`` are those the
 defaults were chosen on (the localizer's: depot and its variants, Intel, ACES) or the confidence
 was calibrated on (Intel, ACES, FHW, depot, the empty room); every other set is a validation set
@@ -49,7 +50,7 @@ import time
 import numpy as np
 
 from .answers import AnswerLog, decided_by
-from .campus import campus_map, office_30m, site_queries, SiteQueries, write_query_bag
+from .campus import campus_map, office_30m, outdoor_30m, site_queries, SiteQueries, write_query_bag
 from .data import data_dir, DATA_HELP
 from .peer import ExhaustiveLocalizer, FullSearchLocalizer
 from .places import (answers_on, foreign, load_place, MAP_RESOLUTION, MapVariant, real_grid,
@@ -80,7 +81,9 @@ DEFAULT_SETS = list(SIM_SETS) + list(REAL_SETS)
 #: success within this many points of an exhaustive search on the same queries (issue target)
 PEER_POINTS = 1.0
 #: the campus-scale sets (``--campus``): 25-30 M cells each
-CAMPUS_SETS = ['campus', 'office_30m']
+CAMPUS_SETS = ['campus', 'office_30m', 'outdoor_30m']
+#: the synthetic campus-scale maps, by set name
+LARGE_SYNTHETIC = {'office_30m': office_30m, 'outdoor_30m': outdoor_30m}
 ALL_SETS = DEFAULT_SETS + list(REAL_SIM_SETS) + CAMPUS_SETS
 #: the sets the defaults were chosen on (the localizer's on depot, Intel and ACES; the confidence
 #: model calibrated on Intel, ACES, FHW, depot and the empty room, by
@@ -102,12 +105,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--quick', action='store_true', help='-n 60 and --real-max 60')
     parser.add_argument('--campus', action='store_true',
                         help='also the campus-scale sets: campus (six real buildings and three '
-                             'simulated maps on one 27.6 M-cell grid) and office_30m')
+                             'simulated maps on one 27.6 M-cell grid), office_30m and '
+                             'outdoor_30m')
     parser.add_argument('--campus-n', type=positive_int, default=100,
                         help='queries per building of the campus set (default 100)')
     parser.add_argument('--campus-bags', metavar='DIR',
                         help='with the campus-scale sets: also write their queries as bags '
-                             '(DIR/campus, DIR/office_30m, with /map and /ground_truth) for '
+                             '(DIR/campus, DIR/office_30m, ..., with /map and /ground_truth) for '
                              '`ssm_localization replay`')
     parser.add_argument('--paper', action='store_true', help='also run the plain paper pipeline')
     parser.add_argument('--peer', action='store_true',
@@ -294,8 +298,8 @@ def run(args: argparse.Namespace) -> int:
             run_campus(args, data, work, index_cfg, loc_cfg, pooled, log)
             print(f'  ({name}: {time.perf_counter() - t0:.0f} s)', flush=True)
             continue
-        if name == 'office_30m':
-            map_name, grid = name, office_30m()
+        if name in LARGE_SYNTHETIC:
+            map_name, grid = name, LARGE_SYNTHETIC[name]()
             scans, truth = sim_queries(grid, args.n, args.seed, {})
             if args.campus_bags:
                 bag = write_query_bag(Path(args.campus_bags) / name, grid, [SiteQueries(

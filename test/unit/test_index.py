@@ -259,6 +259,19 @@ def test_office_map_is_deterministic():
     assert index.kind_counts()['branch'] >= 3
 
 
+def test_outdoor_map_is_deterministic_with_buildings_open_ground_and_unknown():
+    from ssm_localization.bench.synthetic import outdoor_map
+    a, b = outdoor_map(size=120.0), outdoor_map(size=120.0)
+    assert a.shape == (2400, 2400) and a.checksum() == b.checksum()
+    assert a.checksum() != outdoor_map(size=120.0, seed=1).checksum()
+    assert set(np.unique(a.data).tolist()) == {-1, 0, 100}
+    assert 0.0 < (a.data == -1).mean() < 0.2           # open ground far from anything
+    assert 0.01 < (a.data == 100).mean() < 0.1
+    # rooms: the longest straight wall runs are building walls (25-60 m), not trees or cars
+    runs = [np.diff(np.flatnonzero(np.diff(np.r_[0, row == 100, 0]))) for row in a.data]
+    assert max(r[::2].max(initial=0) for r in runs) * a.resolution >= 25.0
+
+
 def test_node_kinds_are_small_ints(built):
     index, _ = built
     assert index.node_kind.dtype == np.int8
