@@ -97,10 +97,11 @@ def outdoor_map(size: float = 270.0, resolution: float = 0.05, seed: int = 0) ->
     """
     Return a deterministic campus with outdoor parts, ``size`` x ``size`` metres (module doc).
 
-    At 270 m (other sizes: as many of each per hectare) six to nine buildings of 25-60 m, each a rectangle of rooms: split along its longer side at
-    30-70 % while a part is wider than 9 m, each inner wall with a 1 m door, two 1.5 m entrances,
-    furniture against walls. Outside: 60 groves of up to 30 trees (0.15-0.4 m trunks), posts
-    every 15 m along six straight paths, 150 benches, up to eight parking lots (four rows of up
+    At 270 m (other sizes: as many of each per hectare) six to nine buildings of 25-60 m, each a
+    rectangle of rooms: split along its longer side at 30-70 % while a part is wider than 9 m,
+    each inner wall with a 1 m door, two 1.5 m entrances, furniture against walls. Outside: 60
+    groves of up to 30 trees (0.15-0.4 m trunks), posts every 15 m along six straight paths, 150
+    benches, up to eight parking lots (four rows of up
     to 15 cars, 70 % of the places taken; 40 tries at a free place) and ten dashed fences.
     """
     rng = np.random.default_rng(seed)
@@ -188,10 +189,11 @@ def outdoor_map(size: float = 270.0, resolution: float = 0.05, seed: int = 0) ->
     lots = 0
     for _ in range(40):                                                   # parking lots
         x0, y0 = rng.uniform(5.0, size - 45.0, 2)
-        if lots == scaled(8) or taken[cells(y0):cells(y0 + 27.0), cells(x0):cells(x0 + 40.0)].any():
+        lot = (slice(cells(y0), cells(y0 + 27.0)), slice(cells(x0), cells(x0 + 40.0)))
+        if lots == scaled(8) or taken[lot].any():
             continue
         lots += 1
-        taken[cells(y0):cells(y0 + 27.0), cells(x0):cells(x0 + 40.0)] = True
+        taken[lot] = True
         for row in range(4):
             for k in range(15):
                 if rng.random() < 0.7:
