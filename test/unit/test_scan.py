@@ -172,6 +172,34 @@ def test_the_compiled_tangents_and_descriptors_equal_numpys():
     assert np.array_equal(one[0], one[2]) and np.array_equal(one[1], one[2])
 
 
+def test_prepare_scan_is_the_same_with_and_without_the_compiled_loops():
+    """Odd inputs too (one point, repeats, a line, NaN, 1e5 and 1e-6 m): same arrays, no crash."""
+    rng = np.random.default_rng(7)
+    kinds = [lambda n: rng.normal(size=(n, 2)) * 5,
+             lambda n: np.repeat(rng.normal(size=(max(n // 3, 1), 2)), 3, axis=0)[:n],
+             lambda n: np.column_stack((np.linspace(0.0, 5.0, n), np.zeros(n))),
+             lambda n: np.full((n, 2), 1.5),
+             lambda n: rng.normal(size=(n, 2)) * 1e5,
+             lambda n: rng.normal(size=(n, 2)) * 1e-6,
+             lambda n: np.where(rng.random((n, 1)) < 0.3, np.nan, rng.normal(size=(n, 2)))]
+    configs = [MatcherConfig(), MatcherConfig(max_points=10), MatcherConfig(length_cap=0.0)]
+    names = ('points', 'tangents', 'descriptors', 'source_index', 'fine_points', 'fine_normals',
+             'fine_weights')
+    loops = ('voxel_select', 'neighbourhood_moments', 'shape_context_histograms')
+    for case in range(210):
+        pts = kinds[case % len(kinds)](int(rng.choice([1, 2, 3, 5, 13, 60, 400])))
+        cfg, fine = configs[case % len(configs)], bool(case % 2)
+        compiled = prepare_scan(pts, cfg, fine=fine)
+        with pytest.MonkeyPatch.context() as mp:
+            for name in loops:
+                mp.setattr(kernels, name, None)
+            plain = prepare_scan(pts, cfg, fine=fine)
+        for name in names:
+            a, b = getattr(compiled, name), getattr(plain, name)
+            assert a.shape == b.shape and np.array_equal(a, b), (case, name)
+    assert all(getattr(kernels, name) is not None for name in loops)
+
+
 # ---------------------------------------------------------------- tangents (eq. 1)
 def test_tangents_eq1_line_gap_and_ends():
     x = np.r_[np.linspace(0, 1, 6), np.linspace(3, 4, 6)]
