@@ -35,20 +35,21 @@ def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radia
     nb = radial_bins * angular_bins
     if n == 0:
         return np.zeros((0, nb), dtype=np.float32)
+    if kernels.shape_context_histograms is not None and len(ctx) > 0:
+        # one compiled pass, the offsets taken pair by pair (kernels.py): the same histograms
+        # up to the last bit of an angle
+        h = np.empty((n, nb))
+        kernels.shape_context_histograms(
+            np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(ctx, np.float64),
+            np.ascontiguousarray(tangents, dtype=np.float64),
+            np.ones(len(ctx)) if weights is None else np.ascontiguousarray(weights, np.float64),
+            float(radius), int(radial_bins), int(angular_bins), h)
+        return _normalised(h)
     if offsets is None:
         dx = ctx[None, :, 0] - points[:, None, 0]
         dy = ctx[None, :, 1] - points[:, None, 1]
     else:
         dx, dy = offsets
-    if kernels.shape_context_histograms is not None and dx.shape[1] > 0:
-        # one compiled pass (kernels.py): the same histograms up to the last bit of an angle
-        h = np.empty((n, nb))
-        kernels.shape_context_histograms(
-            np.ascontiguousarray(dx, dtype=np.float64), np.ascontiguousarray(dy, dtype=np.float64),
-            np.ascontiguousarray(tangents, dtype=np.float64),
-            np.ones(dx.shape[1]) if weights is None else np.ascontiguousarray(weights, np.float64),
-            float(radius), int(radial_bins), int(angular_bins), h)
-        return _normalised(h)
     d2 = dx * dx + dy * dy
     ii, jj = np.nonzero((d2 > 0.0) & (d2 < radius * radius))
     ex = dx[ii, jj]

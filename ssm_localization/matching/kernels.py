@@ -176,28 +176,34 @@ def pairwise_sum_python(values: np.ndarray, n: int, tasks: np.ndarray,
 pairwise_sum = compile_loop(pairwise_sum_python)
 
 
-def neighbourhood_moments_python(dx: np.ndarray, dy: np.ndarray, kth: int, r2_min: float,
-                                 r2_max: float, out: np.ndarray) -> None:
+def neighbourhood_moments_python(points: np.ndarray, context: np.ndarray, kth: int,
+                                 r2_min: float, r2_max: float, out: np.ndarray) -> None:
     """
     Sum the moments of each point's neighbourhood for ``scan.robust_tangents`` into ``out``.
 
-    ``dx``, ``dy`` (N, C): the context points' offsets from each point. Point ``i``'s squared
+    ``points`` (N, 2), ``context`` (C, 2); ``dx``, ``dy``: the context points' offsets from
+    each point (taken pair by pair, as numpy's (N, C) arrays hold them). Point ``i``'s squared
     radius is ``clip(1.0001 d2_(kth), r2_min, r2_max)``, ``d2_(kth)`` the ``kth`` smallest
     (from 0) of its squared distances ``d2 = dx^2 + dy^2`` (``r2_min`` when ``kth`` < 1); with
     ``m = d2 <= r2`` (0 or 1), ``out[i] = sum_j (m, m dx, m dy, m dx dx, m dx dy, m dy dy)``,
     each product and each sum as numpy forms them (:func:`pairwise_sum_python`).
     """
-    n, c = dx.shape
+    n, c = points.shape[0], context.shape[0]
     rows = np.empty((6, c))
+    dx = np.empty(c)
+    dy = np.empty(c)
     smallest = np.empty(max(kth + 1, 1))
     tasks = np.empty((128, 2), np.int64)
     partial = np.empty(64)
     for i in range(n):
+        for j in range(c):
+            dx[j] = context[j, 0] - points[i, 0]
+            dy[j] = context[j, 1] - points[i, 1]
         r2 = r2_min
         if kth >= 1:
             filled = 0
             for j in range(c):
-                d2 = dx[i, j] * dx[i, j] + dy[i, j] * dy[i, j]
+                d2 = dx[j] * dx[j] + dy[j] * dy[j]
                 if filled <= kth:
                     at = filled
                     filled += 1
@@ -211,7 +217,7 @@ def neighbourhood_moments_python(dx: np.ndarray, dy: np.ndarray, kth: int, r2_mi
                 smallest[at] = d2
             r2 = min(max(smallest[kth] * 1.0001, r2_min), r2_max)
         for j in range(c):
-            x, y = dx[i, j], dy[i, j]
+            x, y = dx[j], dy[j]
             m = 1.0 if x * x + y * y <= r2 else 0.0
             mx, my = m * x, m * y
             rows[0, j] = m
@@ -228,20 +234,21 @@ def neighbourhood_moments_python(dx: np.ndarray, dy: np.ndarray, kth: int, r2_mi
 neighbourhood_moments = compile_loop(neighbourhood_moments_python)
 
 
-def shape_context_histograms_python(dx: np.ndarray, dy: np.ndarray, tangents: np.ndarray,
-                                    weights: np.ndarray, radius: float, radial_bins: int,
-                                    angular_bins: int, out: np.ndarray) -> None:
+def shape_context_histograms_python(points: np.ndarray, context: np.ndarray,
+                                    tangents: np.ndarray, weights: np.ndarray, radius: float,
+                                    radial_bins: int, angular_bins: int,
+                                    out: np.ndarray) -> None:
     """
     Fill ``out`` with the log-polar histograms of ``descriptors.shape_context``, unnormalised.
 
-    ``dx``, ``dy`` (N, C) the context points' offsets from each point, ``tangents`` (N, 2) the
-    points' unit tangents, ``weights`` (C,) each context point's vote; ``out`` (N, radial_bins *
+    ``points`` (N, 2) and their unit ``tangents`` (N, 2), ``context`` (C, 2) and ``weights``
+    (C,) each context point's vote; ``out`` (N, radial_bins *
     angular_bins) float64 is overwritten. Each neighbour within ``radius`` (and not at the point
     itself) votes in its radial bin, split linearly between the two nearest angular bins; the
     votes for the nearer and the farther bin are summed apart, then added, as the two
     ``np.bincount`` of the numpy form do.
     """
-    n, c = dx.shape
+    n, c = points.shape[0], context.shape[0]
     nb = radial_bins * angular_bins
     r_in = radius / 2.0 ** (radial_bins - 1)
     rr = radius * radius
@@ -253,7 +260,7 @@ def shape_context_histograms_python(dx: np.ndarray, dy: np.ndarray, tangents: np
         second[:] = 0.0
         ux, uy = tangents[i, 0], tangents[i, 1]
         for j in range(c):
-            ex, ey = dx[i, j], dy[i, j]
+            ex, ey = context[j, 0] - points[i, 0], context[j, 1] - points[i, 1]
             d2 = ex * ex + ey * ey
             if not (d2 > 0.0 and d2 < rr):
                 continue

@@ -295,21 +295,21 @@ def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
     n = len(p)
     if n == 0:
         return np.zeros((0, 2))
-    if offsets is None:
-        dx = context[None, :, 0] - p[:, None, 0]
-        dy = context[None, :, 1] - p[:, None, 1]
-    else:
-        dx, dy = offsets
+    context = np.asarray(context, dtype=float).reshape(-1, 2)
     # radius grown to the min_neighbours-th nearest context point (sparse, grazing walls)
-    kk = min(min_neighbours, dx.shape[1]) - 1
-    if kernels.neighbourhood_moments is not None and dx.shape[1] > 0:
-        # one compiled pass, the same sums (kernels.py)
+    kk = min(min_neighbours, len(context)) - 1
+    if kernels.neighbourhood_moments is not None and len(context) > 0:
+        # one compiled pass, the offsets taken pair by pair, the same sums (kernels.py)
         sums = np.empty((n, 6))
-        kernels.neighbourhood_moments(np.ascontiguousarray(dx, dtype=np.float64),
-                                      np.ascontiguousarray(dy, dtype=np.float64), kk,
-                                      radius * radius, max_radius * max_radius, sums)
+        kernels.neighbourhood_moments(np.ascontiguousarray(p), np.ascontiguousarray(context),
+                                      kk, radius * radius, max_radius * max_radius, sums)
         cnt, sx, sy, sxx, sxy, syy = sums.T
     else:
+        if offsets is None:
+            dx = context[None, :, 0] - p[:, None, 0]
+            dy = context[None, :, 1] - p[:, None, 1]
+        else:
+            dx, dy = offsets
         d2 = dx * dx + dy * dy
         r2 = np.full(n, radius * radius)
         if kk >= 1:
