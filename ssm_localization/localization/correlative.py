@@ -4,9 +4,10 @@ Correlative scan matching by branch and bound over a map (beyond the paper).
 The exhaustive search Cartographer uses to relocalize (Hess et al. 2016, after Olson 2009): a
 scan's points, rotated by each candidate yaw, are scored on a likelihood grid of the map (the
 mean over points of ``exp(-d^2 / 2 sigma^2)``, ``d`` the distance of a point's cell to the nearest
-occupied cell); translations are searched by branch and bound on precomputed grids whose level
-``k`` holds the maximum of the likelihood over the ``2^k x 2^k`` cells anchored at each cell, so
-the score of a window of translations bounds the score of every translation inside it.
+occupied cell on a surface, :func:`surface_cells`); translations are searched by branch and bound
+on precomputed grids whose level ``k`` holds the maximum of the likelihood over the ``2^k x 2^k``
+cells anchored at each cell, so the score of a window of translations bounds the score of every
+translation inside it.
 
 Here the search runs best-first in batches (numpy): the most promising windows of the pool are
 split into their four children together, leaves (single cells) set the bound, and windows whose
@@ -24,6 +25,7 @@ import math
 import time
 
 import numpy as np
+from scipy.ndimage import binary_erosion
 
 from . import kernels
 from ..mapping.distance import clamped_squared_distance
@@ -90,7 +92,7 @@ class CorrelativeGrid:
         self.origin = occ_map.origin
         self.depth = int(depth)
         self.max_range = float(max_range)
-        occ = occ_map.occupied_mask(occupied_thresh)
+        occ = surface_cells(occ_map.occupied_mask(occupied_thresh))
         lik = _block_reduce(likelihood_grid(occ, occ_map.resolution, sigma), coarsen, np.max)
         del occ
         free = _block_reduce(occ_map.free_mask(free_thresh), coarsen, np.any)
@@ -455,6 +457,21 @@ def likelihood_grid(occupied: np.ndarray, resolution: float, sigma: float) -> np
     limit = math.isqrt(len(table) - 1)
     k = clamped_squared_distance(occupied, limit, np.int32)
     return table[k]
+
+
+def surface_cells(occupied: np.ndarray) -> np.ndarray:
+    """
+    Return the ``occupied`` cells with a neighbour (of eight) that is not: a solid's surface.
+
+    A laser's return ends on the surface of what it hits, never inside it: scored against every
+    occupied cell, the points of a scan would fit the inside of a filled shape (a parked car, a
+    pillar, a rack drawn solid) perfectly. Cells on the map's border count as surface.
+    """
+    occ = np.asarray(occupied, bool)
+    surface = binary_erosion(occ, np.ones((3, 3), bool), border_value=0)
+    np.logical_not(surface, out=surface)
+    surface &= occ
+    return surface
 
 
 def _likelihood_table(resolution: float, sigma: float) -> np.ndarray:

@@ -8,7 +8,8 @@ import pytest
 from scipy import ndimage
 from ssm_localization.config.localization import LocalizerConfig
 from ssm_localization.localization import correlative, kernels
-from ssm_localization.localization.correlative import CorrelativeGrid, likelihood_grid
+from ssm_localization.localization.correlative import (CorrelativeGrid, likelihood_grid,
+                                                       surface_cells)
 from ssm_localization.localization.map_layers import search_coarsening
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
@@ -226,6 +227,42 @@ def test_likelihood_grid_is_the_dense_formula():
         dist = ndimage.distance_transform_edt(~occ) * res
         want = np.round(255.0 * np.exp(-0.5 * (dist / sigma) ** 2)).astype(np.uint8)
         assert np.array_equal(likelihood_grid(occ, res, sigma), want)
+
+
+def test_surface_cells_are_the_occupied_cells_beside_others():
+    """An occupied cell is surface when a neighbour (of 8) is not occupied, or is off the map."""
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        occ = rng.random((int(rng.integers(1, 25)), int(rng.integers(1, 25)))) < rng.random()
+        padded = np.pad(occ, 1)
+        want = np.zeros_like(occ)
+        for r, c in zip(*np.nonzero(occ)):
+            want[r, c] = not padded[r:r + 3, c:c + 3].all()
+        assert np.array_equal(surface_cells(occ), want)
+    block = np.zeros((10, 12), bool)
+    block[2:8, 3:10] = True
+    ring = surface_cells(block)
+    assert ring.sum() == 6 * 7 - 4 * 5 and not ring[3:7, 4:9].any()
+
+
+def test_the_inside_of_a_solid_fits_no_scan():
+    """
+    Points inside a filled shape (a parked car drawn solid) score nothing; on its surface, fully.
+
+    Scored against every occupied cell, a scan placed so that its points fall inside the shape
+    would fit as well as at the right pose: the search's look-alikes on a campus's car parks.
+    """
+    d = np.zeros((60, 80), np.int8)
+    d[:2, :] = d[-2:, :] = d[:, :2] = d[:, -2:] = 100
+    d[20:40, 30:60] = 100                          # a 3 m x 2 m solid
+    occ_map = OccupancyMap(d, RES, (0.0, 0.0, 0.0))
+    grid = CorrelativeGrid(occ_map, depth=3, sigma=0.1, max_range=10.0)
+    inside = np.array([[3.55 + 0.2 * i, 2.55 + 0.09 * j] for i in range(10) for j in range(10)])
+    edge = np.array([[3.05 + 0.1 * i, 2.05] for i in range(30)])
+    scores = grid.score_poses(np.vstack((inside, edge)), np.array([(0.0, 0.0, 0.0)]))
+    assert grid.score_poses(inside, np.array([(0.0, 0.0, 0.0)]))[0] == 0.0
+    assert grid.score_poses(edge, np.array([(0.0, 0.0, 0.0)]))[0] > 0.99
+    assert 0.2 < scores[0] < 0.3
 
 
 def test_free_pyramid_at_window_anchors(grid):
