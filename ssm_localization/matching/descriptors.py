@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
+from .scan import pair_offsets
 
 
 def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radial_bins: int,
@@ -45,11 +46,7 @@ def shape_context(points: np.ndarray, tangents: np.ndarray, radius: float, radia
             np.ones(len(ctx)) if weights is None else np.ascontiguousarray(weights, np.float64),
             float(radius), int(radial_bins), int(angular_bins), h)
         return _normalised(h)
-    if offsets is None:
-        dx = ctx[None, :, 0] - points[:, None, 0]
-        dy = ctx[None, :, 1] - points[:, None, 1]
-    else:
-        dx, dy = offsets
+    dx, dy = pair_offsets(points, ctx) if offsets is None else offsets
     d2 = dx * dx + dy * dy
     ii, jj = np.nonzero((d2 > 0.0) & (d2 < radius * radius))
     ex = dx[ii, jj]

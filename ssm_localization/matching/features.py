@@ -16,8 +16,8 @@ from scipy.spatial import cKDTree
 from . import kernels
 from .descriptors import shape_context
 from .pairwise import angle_table, distance_table
-from .scan import (as_points, downsample_even, length_weights, local_normals, robust_tangents,
-                   sweep_direction, tangents)
+from .scan import (as_points, downsample_even, length_weights, local_normals, pair_offsets,
+                   robust_tangents, sweep_direction, tangents)
 from ..config.matcher import MatcherConfig
 
 
@@ -122,8 +122,7 @@ def prepare_scan(points_xy, config: MatcherConfig | None = None, *,
     ctx = p[downsample_even(p, 4 * config.max_points, config.context_spacing)]
     # the numpy forms of the tangents and the descriptors share the (N, C) offsets; the
     # compiled loops (kernels.py) take them pair by pair and need no such arrays
-    offsets = None if kernels.neighbourhood_moments is not None else (
-        ctx[None, :, 0] - pts[:, None, 0], ctx[None, :, 1] - pts[:, None, 1])
+    offsets = None if kernels.neighbourhood_moments is not None else pair_offsets(pts, ctx)
     if config.tangent_method == 'eq1':
         u = tangents(pts, config.gap, sweep_direction(p))
     else:

@@ -277,6 +277,11 @@ def length_weights(points: np.ndarray, spacing: float, cap: float) -> np.ndarray
     return np.clip(near, spacing, max(cap, spacing))
 
 
+def pair_offsets(points: np.ndarray, context: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``(dx, dy)`` = ``context - points`` for every pair, each (N, C)."""
+    return (context[None, :, 0] - points[:, None, 0], context[None, :, 1] - points[:, None, 1])
+
+
 def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
                     direction: float = 1.0, offsets=None, min_neighbours: int = 4,
                     max_radius: float = 1.0) -> np.ndarray:
@@ -305,11 +310,7 @@ def robust_tangents(points: np.ndarray, context: np.ndarray, radius: float,
                                       kk, radius * radius, max_radius * max_radius, sums)
         cnt, sx, sy, sxx, sxy, syy = sums.T
     else:
-        if offsets is None:
-            dx = context[None, :, 0] - p[:, None, 0]
-            dy = context[None, :, 1] - p[:, None, 1]
-        else:
-            dx, dy = offsets
+        dx, dy = pair_offsets(p, context) if offsets is None else offsets
         d2 = dx * dx + dy * dy
         r2 = np.full(n, radius * radius)
         if kk >= 1:
