@@ -26,6 +26,7 @@ from sensor_msgs.msg import LaserScan
 from ssm_localization.io.bag_reader import read_bag
 from ssm_localization.ros.conversions import (laser_scan_from_record, occupancy_grid_from_map,
                                               pose_msg, pose_stamped, time_msg)
+from ssm_localization.ros.executor import shutdown_context
 from ssm_localization.ros.qos import LATCHED_QOS
 
 STREAM_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -213,5 +214,5 @@ def play_bag(bag: str | Path, rate: float = 1.0, loop: bool = False,
     finally:
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        shutdown_context()
     return 0

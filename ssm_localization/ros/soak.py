@@ -32,6 +32,7 @@ from sensor_msgs.msg import LaserScan
 from ssm_localization.evaluation.plotting import plot_soak
 from ssm_localization.io.bag_reader import read_bag
 from ssm_localization.ros.conversions import laser_scan_from_record, occupancy_grid_from_map
+from ssm_localization.ros.executor import shutdown_context
 from ssm_localization.ros.qos import LATCHED_QOS
 
 
@@ -136,7 +137,7 @@ def soak(bag: Path, minutes: float, rate: float = 10.0, sample_s: float = 5.0,
             proc.kill()
         executor.shutdown()
         driver.destroy_node()
-        rclpy.try_shutdown()
+        shutdown_context()
     return report(samples, warmup_s, flat_tolerance, plot)
 
 
