@@ -56,7 +56,7 @@ class ConfidenceModel:
     #: too much seen through walls or too little explained; ``rival``: a distinct pose scores
     #: about as well; ``degenerate``: the position is undetermined along some direction), the
     #: rate at which such answers were right on the calibration split (``rival`` as measured;
-    #: the verdict reports P itself for those, below ``min_confidence``: ``localizer.verdict``)
+    #: the verdict reports ``min(P, 2/(k+1))`` for those, ``localizer.verdict``)
     refused: dict[str, float] = field(default_factory=lambda: dict(REFUSED_REASONS))
     calibration: tuple[tuple[float, float], ...] = ()
     split: str = ''

@@ -17,8 +17,7 @@ from ssm_localization import (build_index, GlobalLocalizer, IndexConfig, Localiz
 from ssm_localization.bench.peer import FullSearchLocalizer
 from ssm_localization.config.confidence import CONFIDENCE_MODEL
 from ssm_localization.localization.evidence import Evidence
-from ssm_localization.localization.localizer import (Hypothesis, RIVAL_BELOW, STATUSES, verdict,
-                                                     vicinity_score)
+from ssm_localization.localization.localizer import Hypothesis, STATUSES, verdict, vicinity_score
 from ssm_localization.localization.verify import BeamCheck
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
@@ -447,7 +446,7 @@ def test_a_place_that_explains_more_but_sees_through_a_few_more_specks_is_a_riva
         assert status == want, (rival.explained, rival.contradicting, msg)
         if want == 'ambiguous':
             assert 'explains more of the scan, 90% against 89%' in msg
-            assert conf < cfg.min_confidence and cov[0, 0] >= 8.0 ** 2
+            assert conf <= 2.0 / 3.0 and cov[0, 0] >= 8.0 ** 2
     # a rival that explains more but scores too little to be an answer at all is none
     weak = dataclasses.replace(place(17.0, 0.95, 0.2), score=cfg.min_score - 0.01)
     assert verdict([best, weak], cfg, STRONG)[0] == 'ok'
@@ -487,19 +486,14 @@ def test_verdict_asks_the_confidence_once_the_rules_pass():
     status, _, _, conf = verdict([best], cfg, None)
     assert status == 'failed' and conf == 0.0
     # a refused answer reports the rate at which such answers were right when calibrating;
-    # one refused for its rivals its P(right | evidence) (the evidence weighs the rivals), but
-    # below min_confidence: it is not ok, whatever the evidence says
+    # one refused for its rivals at most 2 / (k + 1): k poses fit, the best counts double
     rival = _verified((5.0, 0.0, 0.0), 0.8)
     third = _verified((0.0, 6.0, 0.0), 0.8)
-    strong = verdict([best], cfg, STRONG)[3]
     assert verdict([best, rival], cfg, STRONG)[0] == 'ambiguous'
-    assert verdict([best, rival], cfg, STRONG)[3] == pytest.approx(
-        cfg.min_confidence - RIVAL_BELOW)
-    assert cfg.min_confidence - RIVAL_BELOW < strong
-    assert verdict([best, rival, third], cfg, STRONG)[3] == pytest.approx(
-        cfg.min_confidence - RIVAL_BELOW)
-    assert verdict([best, rival], cfg, weak)[3] == pytest.approx(verdict([best], cfg, weak)[3])
-    assert verdict([best, rival], dataclasses.replace(cfg, min_confidence=0.0), STRONG)[3] == 0.0
+    assert verdict([best, rival], cfg, STRONG)[3] == pytest.approx(2.0 / 3.0)
+    assert verdict([best, rival, third], cfg, STRONG)[3] == pytest.approx(0.5)
+    assert verdict([best, rival], cfg, weak)[3] == pytest.approx(min(2.0 / 3.0, verdict(
+        [best], cfg, weak)[3]))
     assert verdict([best, rival], cfg, None)[3] == 0.0
     assert verdict([_verified((0.0, 0.0, 0.0), 0.8, 1.5 * cfg.max_position_std)], cfg,
                    STRONG)[3] == CONFIDENCE_MODEL.refused['degenerate']
