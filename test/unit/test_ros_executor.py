@@ -2,8 +2,8 @@
 shutdown_context: a signal that shuts the context down during the exit is a clean exit.
 
 The race itself (rclpy's signal thread between ``try_shutdown``'s check and its shutdown) is
-what test_ros_e2e.py's signal test met about once in ten exits; here its two outcomes are made
-to happen on purpose.
+what test_ros_e2e.py's signal test met once on a new machine (then not in 48 exits); here its
+two outcomes are made to happen on purpose.
 """
 from __future__ import annotations
 
