@@ -349,7 +349,7 @@ def test_bench_localize_writes_every_answer_it_graded(tmp_path, capsys):
             assert confidence >= LocalizerConfig().min_confidence
         if r['decided_by'] == 'rival':
             assert int(r['look_alikes']) >= 2
-            assert confidence <= 1.0 / int(r['look_alikes']) + 1e-6
+            assert confidence <= 2.0 / (int(r['look_alikes']) + 1) + 1e-6
         if r['decided_by'] == 'no pose':
             assert confidence == 0.0 and r['explained'] == ''
         else:
