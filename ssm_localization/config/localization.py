@@ -58,6 +58,11 @@ class LocalizerConfig:
                                            'region): the search once more at this many further '
                                            'alignment yaws, its places decided together with '
                                            'the first ones')
+    search_twins: bool = param(False, 'an ok answer on a map of several regions (a campus) is '
+                                      'checked for twins: the search once more in every region '
+                                      "at the answer's yaw and its flip, its places decided "
+                                      'together with the first ones (a look-alike room '
+                                      'elsewhere is a rival, not luck); costs latency')
     search_budget: float = param(0.2, 'seconds after which the search stops with what it has')
     # -- refinement on the wall surface
     refine_hypotheses: int = param(8, 'hypotheses refined on the wall surface (best by '

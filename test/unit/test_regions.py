@@ -1,6 +1,7 @@
 """localization/regions.py: the correlative search region by region, each at its own yaws."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from helpers import BAGS
@@ -8,8 +9,10 @@ import numpy as np
 import pytest
 from ssm_localization import build_index, GlobalLocalizer, OccupancyMap, read_bag
 from ssm_localization.bench.peer import FullSearchLocalizer
+from ssm_localization.config.localization import LocalizerConfig
 from ssm_localization.localization.correlative import CorrelativeResult
-from ssm_localization.localization.localizer import _by_correlation
+from ssm_localization.localization.localizer import (_by_correlation, Hypothesis, OK,
+                                                     StageClock)
 from ssm_localization.localization.regions import (
     pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, with_region_bests)
 from ssm_localization.mapping.raycast import beam_angles, cast_rays
@@ -199,3 +202,49 @@ def test_leaves_and_refinement_keep_each_regions_best():
                                                                                ranked[4]]
     Regions.count = 1
     assert with_region_bests(Regions, ranked, 2, lambda p: p) == ranked[:2]
+
+
+def _twin_answer(seed_b: int) -> tuple:
+    """
+    Return a scan in building A of a campus whose building B is A's twin (``seed_b`` 1) or not (2).
+
+    With the localizer (``search_twins`` on), the query, the answer decided on A's place
+    alone (as when the search kept only one of two twins) and its places.
+    """
+    data = np.full((400, 1300), -1, np.int8)
+    _building(data, 2.0, 4.0, 0.0, 1)
+    _building(data, 42.0, 4.0, 0.0, seed_b)
+    occ = OccupancyMap(data, RES, (0.0, 0.0, 0.0))
+    loc = GlobalLocalizer(build_index(occ), LocalizerConfig(search_twins=True))
+    assert loc.regions.count == 2
+    truth = (8.0, 7.0, 0.4)
+    angles = beam_angles(360)
+    ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([truth]), angles,
+                       30.0)[0]
+    query = loc.prepare_scan(ranges, float(angles[0]), float(angles[1] - angles[0]), 0.0, 30.0)
+    clock = StageClock()
+    hyps = loc.correlate(query, [Hypothesis(source='search', initial_pose=truth)])
+    verified, others = loc.examine(query, hyps, clock)
+    answer = loc.decide(query, verified, clock, others=others)
+    return loc, query, answer, verified, others, clock
+
+
+def test_the_twin_check_finds_the_twin_the_first_search_missed():
+    loc, query, answer, verified, others, clock = _twin_answer(1)
+    assert answer.status == OK and abs(answer.pose[0] - 8.0) < 0.05      # one twin: unique
+    checked = loc.twin_check(query, answer, verified, others, clock)
+    assert checked.status != OK and 'distinct poses fit' in checked.message
+    twins = [h for h in checked.candidates if h.check is not None
+             and math.hypot(h.pose[0] - 48.0, h.pose[1] - 7.0) < 0.1]
+    assert twins and abs(twins[0].score - answer.score) < 0.02
+    off = dataclasses.replace(loc.config, search_twins=False)
+    assert GlobalLocalizer(loc.index, off).twin_check(query, answer, verified, others,
+                                                      clock) is answer
+
+
+def test_the_twin_check_keeps_a_unique_answer():
+    loc, query, answer, verified, others, clock = _twin_answer(2)
+    assert answer.status == OK
+    checked = loc.twin_check(query, answer, verified, others, clock)
+    assert checked.status == OK
+    assert math.hypot(checked.pose[0] - 8.0, checked.pose[1] - 7.0) < 0.05
