@@ -450,8 +450,7 @@ class GlobalLocalizer:
         clock.lap('search')
         if not found:
             return None
-        verified, more = self.examine(query, found, clock, before=verified)
-        return self.decide(query, verified, clock, others=more + others)
+        return self.decide_again(query, found, verified, others, clock)
 
     def twin_check(self, query: Query, answer: Localization, verified: list[Hypothesis],
                    others: list[Hypothesis], clock: StageClock) -> Localization:
@@ -483,6 +482,17 @@ class GlobalLocalizer:
         clock.lap('twins')
         if not found:
             return replace(answer, latency_ms=clock.total_ms)
+        return self.decide_again(query, found, verified, others, clock)
+
+    def decide_again(self, query: Query, found: list[Hypothesis], verified: list[Hypothesis],
+                     others: list[Hypothesis], clock: StageClock) -> Localization:
+        """
+        Return the answer decided on a further search's places ``found`` and the first ones.
+
+        ``found`` are examined (:meth:`examine`) joined with the places ``verified`` before (a
+        place met twice counts once, a rival found before stays a rival); ``others``, the first
+        look's hypotheses not refined, stay among the candidates.
+        """
         verified, more = self.examine(query, found, clock, before=verified)
         return self.decide(query, verified, clock, others=more + others)
 
