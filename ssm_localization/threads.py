@@ -12,6 +12,11 @@ starts, before numpy is imported: by the console scripts (``ssm_localization``,
 nothing. Set ``OPENBLAS_NUM_THREADS`` (or ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS``) before
 starting to override; a program that imports the library can call :func:`limit_blas_threads`
 before it imports numpy to get the same default.
+
+One stage is the exception, by its own parameter: the pose votes' k-d tree query runs in
+``localizer.vote_workers`` (2) threads of scipy's, which split the query points among them and
+are joined when it returns (nothing spins). Paired per query, with the other core idle and with
+it busy, the answers are the same and the time not worse (docs/EXPERIMENTS.md, 2026-12-02).
 """
 from __future__ import annotations
 

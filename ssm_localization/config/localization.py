@@ -23,6 +23,9 @@ class LocalizerConfig:
     vote_descriptor_dims: int = param(12, 'nearest descriptors are searched in this many leading '
                                           'principal axes with a k-d tree (0: exactly, by brute '
                                           'force: cost linear in the map size)')
+    vote_workers: int = param(2, 'threads the nearest-descriptor query of the votes runs in '
+                                 "(scipy's k-d tree workers; -1: every core); the answers are "
+                                 'the same with any number')
     vote_peaks: int = param(16, 'strongest pose-vote peaks whose correspondences are matched '
                                 'spectrally (eqs. 2-6)')
     top_n: int = param(10, 'peaks kept by the spectral coarse ranking (eq. 5) for the RANSAC '
@@ -146,6 +149,9 @@ class LocalizerConfig:
                        'min_position_std',
                        'min_yaw_std', 'min_points')
         check_numbers(self, positive, nonnegative)
+        if self.vote_workers != -1 and self.vote_workers < 1:
+            raise ValueError(f'LocalizerConfig.vote_workers must be -1 (every core) or at least '
+                             f'1, got {self.vote_workers!r}')
         if not 0.0 <= self.min_confidence <= 1.0:
             raise ValueError(f'LocalizerConfig.min_confidence must be in [0, 1], got '
                              f'{self.min_confidence!r}')

@@ -60,7 +60,7 @@ def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
         caster = index.ray_caster()     # the virtual scans' when the index was built here
     with layer(LAYER_NAMES[3]):
         voting = PoseVoting(index, cfg.vote_neighbours, cfg.vote_bin_xy, cfg.vote_bin_yaw,
-                            search_dims=cfg.vote_descriptor_dims)
+                            search_dims=cfg.vote_descriptor_dims, workers=cfg.vote_workers)
     with layer(LAYER_NAMES[4]):
         regions = SearchRegions.build(grid, voting, index.node_xy)
     return MapLayers(voting=voting, grid=grid, surface=surface, caster=caster,

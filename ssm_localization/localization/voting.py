@@ -73,9 +73,14 @@ class PoseVoting:
     def __init__(self, index: MapIndex, neighbours: int = 20, bin_xy: float = 0.5,
                  bin_yaw: float = math.radians(10.0), range_scale: float = 5.0,
                  merge_xy: float = 0.1, merge_yaw: float = math.radians(15.0),
-                 search_dims: int = 12) -> None:
+                 search_dims: int = 12, workers: int = 1) -> None:
         if neighbours < 1 or not (bin_xy > 0 and bin_yaw > 0):
             raise ValueError('PoseVoting: neighbours >= 1 and positive bin sizes required')
+        if workers != -1 and workers < 1:
+            raise ValueError(f'PoseVoting: workers must be -1 or at least 1, got {workers!r}')
+        #: threads of the tree query (scipy's ``workers``): each takes a share of the query
+        #: points, so the neighbours are the same with any number
+        self.workers = int(workers)
         pos, ang, desc, node, rng = [], [], [], [], []
         for k, f in enumerate(index.features):
             pose = tuple(float(v) for v in index.node_sensor_pose[k])
@@ -149,7 +154,8 @@ class PoseVoting:
         if self._tree is not None:
             # candidates from the tree, re-ranked by their exact descriptor distance
             kk = min(RERANK * k, n_m)
-            _, cand = self._tree.query((q_desc - self._mean) @ self._axes, k=kk, eps=TREE_EPS)
+            _, cand = self._tree.query((q_desc - self._mean) @ self._axes, k=kk, eps=TREE_EPS,
+                                       workers=self.workers)
             cand = np.asarray(cand).reshape(n_q, kk)
             diff = self.descriptors[cand] - q_desc[:, None, :]
             d2 = np.einsum('qkd,qkd->qk', diff, diff)
