@@ -66,6 +66,11 @@ class LocalizerConfig:
                                       "at the answer's yaw and its flip, its places decided "
                                       'together with the first ones (a look-alike room '
                                       'elsewhere is a rival, not luck); costs latency')
+    search_flips: bool = param(True, 'an ok answer on a map of one region (a building) is '
+                                     'checked for its flip: the search once more over the map '
+                                     "at the answer's yaw and its half turn, its places decided "
+                                     'together with the first ones (a room that fits turned '
+                                     'round is a rival, not a lost leaf)')
     search_budget: float = param(0.2, 'seconds after which the search stops with what it has')
     # -- refinement on the wall surface
     refine_hypotheses: int = param(8, 'hypotheses refined on the wall surface (best by '

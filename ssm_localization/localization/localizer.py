@@ -15,8 +15,9 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
    map at the yaws of the best hypotheses and their flips, which finds the places the voting
    missed (typically a corridor whose position along it only far walls tell); an answer that
    is not ``ok`` in the end gets a second look, the search at further yaws (``second_look``);
-   an ``ok`` one on a map of several regions is checked for twins, the search at its yaw in
-   every region (``twin_check``);
+   an ``ok`` one is checked for its look-alikes, the search at its yaw and its half turn over
+   the whole map (``twin_check``: on a map of one region by default, of several with
+   ``search_twins``);
 6. refinement (``refine.py``): Gauss-Newton on the map's wall surface, the surface offset
    estimated from the scan, on the even points, and once more from the optimum of every
    endpoint (the few even points alone can settle half a degree off); the explained fraction
@@ -463,14 +464,19 @@ class GlobalLocalizer:
         bin off, and which of two twins the search keeps is luck. Here every region is searched
         at the answer's laser yaw and its flip (a room turned by a half turn); the places found
         join the first ones and the answer is decided on all of them, so a twin becomes the
-        rival it is. Maps of one region search the seeds' yaws everywhere already: the answer
-        as it is. Off by default (``search_twins``): on the 30 M-cell office over three query
-        seeds it removed 3 of 4 wrong ``ok`` answers for 1-2 points of success and 30-55 ms
-        more p95 latency; on the campus it changed no precision (docs/EXPERIMENTS.md).
+        rival it is. On a map of several regions off by default (``search_twins``): on the
+        30 M-cell office over three query seeds it removed 3 of 4 wrong ``ok`` answers for 1-2
+        points of success and 30-55 ms more p95 latency; on the campus it changed no precision.
+        A map of one region searches the seeds' yaws everywhere already, but a seed's yaw is
+        the hypothesis's, up to a bin off the refined answer, and a room that fits turned round
+        is kept or lost by the search's leaf cap: the check (``search_flips``, on by default)
+        searches the answer's own yaw and half turn. On the benchmark's 17 370 single scans it
+        made two wrong ``ok`` answers ``ambiguous`` (90° lasers, 177-180° off) for some 0.3
+        points of success on weak lasers (docs/EXPERIMENTS.md).
         """
         cfg = self.config
-        if not (cfg.search and cfg.search_twins) or self.regions.count <= 1 \
-                or answer.pose is None:
+        wanted = cfg.search_twins if self.regions.count > 1 else cfg.search_flips
+        if not (cfg.search and wanted) or answer.pose is None:
             return answer
         yaw = self.laser_pose(answer.pose)[2]
         yaws = np.array([yaw, yaw + math.pi])

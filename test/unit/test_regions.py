@@ -204,19 +204,24 @@ def test_leaves_and_refinement_keep_each_regions_best():
     assert with_region_bests(Regions, ranked, 2, lambda p: p) == ranked[:2]
 
 
-def _twin_answer(seed_b: int) -> tuple:
+def _twin_answer(seed_b: int, turned: bool = False) -> tuple:
     """
     Return a scan in building A of a campus whose building B is A's twin (``seed_b`` 1) or not (2).
 
     With the localizer (``search_twins`` on), the query, the answer decided on A's place
-    alone (as when the search kept only one of two twins) and its places.
+    alone (as when the search kept only one of two twins) and its places. ``turned``: B is
+    drawn turned by a half turn right beside A, so the map is one region (one building whose
+    two halves look alike turned round).
     """
     data = np.full((400, 1300), -1, np.int8)
     _building(data, 2.0, 4.0, 0.0, 1)
-    _building(data, 42.0, 4.0, 0.0, seed_b)
+    if turned:
+        _building(data, 34.0, 16.0, math.pi, seed_b)        # x 18-34 m, y 4-16 m
+    else:
+        _building(data, 42.0, 4.0, 0.0, seed_b)
     occ = OccupancyMap(data, RES, (0.0, 0.0, 0.0))
     loc = GlobalLocalizer(build_index(occ), LocalizerConfig(search_twins=True))
-    assert loc.regions.count == 2
+    assert loc.regions.count == (1 if turned else 2)
     truth = (8.0, 7.0, 0.4)
     angles = beam_angles(360)
     ranges = cast_rays(occ.occupied_mask(), RES, occ.origin, np.array([truth]), angles,
@@ -244,6 +249,34 @@ def test_the_twin_check_finds_the_twin_the_first_search_missed():
 
 def test_the_twin_check_keeps_a_unique_answer():
     loc, query, answer, verified, others, clock = _twin_answer(2)
+    assert answer.status == OK
+    checked = loc.twin_check(query, answer, verified, others, clock)
+    assert checked.status == OK
+    assert math.hypot(checked.pose[0] - 8.0, checked.pose[1] - 7.0) < 0.05
+
+
+def test_the_flip_check_finds_the_half_turned_look_alike_on_a_map_of_one_region():
+    loc, query, answer, verified, others, clock = _twin_answer(1, turned=True)
+    assert answer.status == OK and abs(answer.pose[0] - 8.0) < 0.05
+    checked = loc.twin_check(query, answer, verified, others, clock)
+    assert checked.status != OK and 'distinct poses fit' in checked.message
+    # A's (8, 7), (6, 3) from A's corner (2, 4), is (28, 13) in B, 3 m and 6 m from its
+    # corner (34, 16) turned round; the yaw 0.4 plus a half turn
+    twins = [h for h in checked.candidates if h.check is not None
+             and math.hypot(h.pose[0] - 28.0, h.pose[1] - 13.0) < 0.1
+             and abs(wrap_angle(h.pose[2] - (0.4 - math.pi))) < 0.02]
+    assert twins and abs(twins[0].score - answer.score) < 0.02
+    off = dataclasses.replace(loc.config, search_flips=False)
+    assert GlobalLocalizer(loc.index, off).twin_check(query, answer, verified, others,
+                                                      clock) is answer
+    # the twin check of several regions is a separate choice
+    campus_off = dataclasses.replace(loc.config, search_twins=False)
+    assert GlobalLocalizer(loc.index, campus_off).twin_check(
+        query, answer, verified, others, clock).status != OK
+
+
+def test_the_flip_check_keeps_a_unique_answer_on_a_map_of_one_region():
+    loc, query, answer, verified, others, clock = _twin_answer(2, turned=True)
     assert answer.status == OK
     checked = loc.twin_check(query, answer, verified, others, clock)
     assert checked.status == OK
