@@ -61,11 +61,16 @@ class LocalizerConfig:
                                            'region): the search once more at this many further '
                                            'alignment yaws, its places decided together with '
                                            'the first ones')
-    search_twins: bool = param(False, 'an ok answer on a map of several regions (a campus) is '
-                                      'checked for twins: the search once more in every region '
-                                      "at the answer's yaw and its flip, its places decided "
-                                      'together with the first ones (a look-alike room '
-                                      'elsewhere is a rival, not luck); costs latency')
+    search_twins: bool = param(True, 'an ok answer on a map of several regions (a campus) is '
+                                     'checked for twins: the search once more in every region '
+                                     "at the answer's yaw and its flip, its places decided "
+                                     'together with the first ones (a look-alike room '
+                                     'elsewhere is a rival, not luck); costs latency')
+    search_twins_below: float = param(0.99, 'the twin check of maps of several regions runs '
+                                            'only for ok answers with a confidence below this '
+                                            '(1: every ok answer), and looks only for places '
+                                            "scoring 0.85 of the answer's own correlative "
+                                            'score or more')
     search_flips: bool = param(True, 'an ok answer on a map of one region (a building) is '
                                      'checked for its flip: the search once more over the map '
                                      "at the answer's yaw and its half turn, its places decided "
@@ -157,9 +162,10 @@ class LocalizerConfig:
         if self.vote_workers != -1 and self.vote_workers < 1:
             raise ValueError(f'LocalizerConfig.vote_workers must be -1 (every core) or at least '
                              f'1, got {self.vote_workers!r}')
-        if not 0.0 <= self.min_confidence <= 1.0:
-            raise ValueError(f'LocalizerConfig.min_confidence must be in [0, 1], got '
-                             f'{self.min_confidence!r}')
+        for name in ('min_confidence', 'search_twins_below'):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f'LocalizerConfig.{name} must be in [0, 1], got '
+                                 f'{getattr(self, name)!r}')
         if not 0.0 < self.search_ratio <= 1.0:
             raise ValueError(f'LocalizerConfig.search_ratio must be in (0, 1], got '
                              f'{self.search_ratio!r}')

@@ -16,8 +16,8 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
    missed (typically a corridor whose position along it only far walls tell); an answer that
    is not ``ok`` in the end gets a second look, the search at further yaws (``second_look``);
    an ``ok`` one is checked for its look-alikes, the search at its yaw and its half turn over
-   the whole map (``twin_check``: on a map of one region by default, of several with
-   ``search_twins``);
+   the whole map (``twin_check``: on a map of one region ``search_flips``; on a map of several,
+   ``search_twins``, for an answer below ``search_twins_below``);
 6. refinement (``refine.py``): Gauss-Newton on the map's wall surface, the surface offset
    estimated from the scan, on the even points, and once more from the optimum of every
    endpoint (the few even points alone can settle half a degree off); the explained fraction
@@ -464,9 +464,14 @@ class GlobalLocalizer:
         bin off, and which of two twins the search keeps is luck. Here every region is searched
         at the answer's laser yaw and its flip (a room turned by a half turn); the places found
         join the first ones and the answer is decided on all of them, so a twin becomes the
-        rival it is. On a map of several regions off by default (``search_twins``): on the
-        30 M-cell office over three query seeds it removed 3 of 4 wrong ``ok`` answers for 1-2
-        points of success and 30-55 ms more p95 latency; on the campus it changed no precision.
+        rival it is. On a map of several regions (``search_twins``) only an answer below
+        ``search_twins_below`` (0.99) is checked, and only places scoring at least
+        ``REGION_RATIO`` of the answer's own correlative score are looked for (a twin fits about
+        as well; the floor lets the search prune): on the 30 M-cell office over three query
+        seeds it removed 3 of 4 wrong ``ok`` answers (7 right ones of 487 became ``ambiguous``,
+        twin rooms told apart by nothing in the scan), the campus's and the outdoor map's
+        answers the same, for 0-18 ms of p95 latency; on the tuning split no answer of 0.99 or
+        more was wrong (docs/EXPERIMENTS.md).
         A map of one region searches the seeds' yaws everywhere already, but a seed's yaw is
         the hypothesis's, up to a bin off the refined answer, and a room that fits turned round
         is kept or lost by the search's leaf cap: the check (``search_flips``, on by default)
@@ -476,14 +481,23 @@ class GlobalLocalizer:
         a query (docs/EXPERIMENTS.md).
         """
         cfg = self.config
-        wanted = cfg.search_twins if self.regions.count > 1 else cfg.search_flips
+        several = self.regions.count > 1
+        wanted = cfg.search_twins if several else cfg.search_flips
         if not (cfg.search and wanted) or answer.pose is None:
             return answer
-        yaw = self.laser_pose(answer.pose)[2]
-        yaws = np.array([yaw, yaw + math.pi])
+        if several and answer.confidence >= cfg.search_twins_below:
+            return answer
+        laser = self.laser_pose(answer.pose)
+        yaws = np.array([laser[2], laser[2] + math.pi])
         plan = SearchPlan(yaws, np.ones((len(yaws), self.regions.count), bool),
                           self.regions.labels)
-        found = [h for h in self.correlate(query, self.search_hypotheses(query, plan))
+        floor = None
+        if several:
+            own = self.grid.score_poses(_evenly(query.features.points, cfg.search_points),
+                                        np.array([laser]))[0]
+            floor = max(cfg.search_min_score, REGION_RATIO * float(own))
+        found = [h for h in self.correlate(query, self.search_hypotheses(query, plan,
+                                                                         min_score=floor))
                  if distinct(self.base_pose(h.initial_pose), answer.pose, cfg.distinct_xy,
                              cfg.distinct_yaw)]
         clock.lap('twins')
@@ -557,14 +571,15 @@ class GlobalLocalizer:
         return sel, matching_score(g, sel)
 
     def search_hypotheses(self, query: Query, yaws: np.ndarray | SearchPlan,
-                          window: tuple[float, float, float, float] | None = None
-                          ) -> list[Hypothesis]:
+                          window: tuple[float, float, float, float] | None = None,
+                          min_score: float | None = None) -> list[Hypothesis]:
         """
         Correlative branch and bound over the whole map (or ``window``) at the given ``yaws``.
 
         ``yaws`` may be a :class:`~.regions.SearchPlan` (each yaw in its regions, see
         :meth:`search_plan`). At most ``search_keep`` distinct leaves, best first (see
-        :meth:`search_yaws`).
+        :meth:`search_yaws`). ``min_score``: no leaf scoring less (default
+        ``search_min_score``).
         """
         cfg = self.config
         plan = yaws if isinstance(yaws, SearchPlan) and yaws.allowed.shape[1] > 1 else None
@@ -575,7 +590,8 @@ class GlobalLocalizer:
         regional = {} if plan is None else {
             'regions': plan.regions, 'region_ratio': REGION_RATIO, 'batch': REGION_BATCH,
             'hot_batches': REGION_HOT_BATCHES}
-        found = self.grid.search(pts, yaws=yaws, window=window, min_score=cfg.search_min_score,
+        floor = cfg.search_min_score if min_score is None else min_score
+        found = self.grid.search(pts, yaws=yaws, window=window, min_score=floor,
                                  ratio=cfg.search_ratio, budget_s=cfg.search_budget, **regional)
         return [Hypothesis(source='search', initial_pose=tuple(float(v) for v in found.poses[i]),
                            correlative=float(found.scores[i]))

@@ -14,7 +14,7 @@ from ssm_localization.localization.correlative import CorrelativeResult
 from ssm_localization.localization.localizer import (_by_correlation, Hypothesis, OK,
                                                      StageClock)
 from ssm_localization.localization.regions import (
-    pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, with_region_bests)
+    pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, SearchPlan, with_region_bests)
 from ssm_localization.mapping.raycast import beam_angles, cast_rays
 from ssm_localization.transforms import apply, wrap_angle
 
@@ -204,11 +204,12 @@ def test_leaves_and_refinement_keep_each_regions_best():
     assert with_region_bests(Regions, ranked, 2, lambda p: p) == ranked[:2]
 
 
-def _twin_answer(seed_b: int, turned: bool = False) -> tuple:
+def _twin_answer(seed_b: int, turned: bool = False, below: float = 1.0) -> tuple:
     """
     Return a scan in building A of a campus whose building B is A's twin (``seed_b`` 1) or not (2).
 
-    With the localizer (``search_twins`` on), the query, the answer decided on A's place
+    With the localizer (``search_twins`` on, every ``ok`` answer below ``below`` checked), the
+    query, the answer decided on A's place
     alone (as when the search kept only one of two twins) and its places. ``turned``: B is
     drawn turned by a half turn right beside A, so the map is one region (one building whose
     two halves look alike turned round).
@@ -220,7 +221,8 @@ def _twin_answer(seed_b: int, turned: bool = False) -> tuple:
     else:
         _building(data, 42.0, 4.0, 0.0, seed_b)
     occ = OccupancyMap(data, RES, (0.0, 0.0, 0.0))
-    loc = GlobalLocalizer(build_index(occ), LocalizerConfig(search_twins=True))
+    loc = GlobalLocalizer(build_index(occ), LocalizerConfig(search_twins=True,
+                                                            search_twins_below=below))
     assert loc.regions.count == (1 if turned else 2)
     truth = (8.0, 7.0, 0.4)
     angles = beam_angles(360)
@@ -245,6 +247,32 @@ def test_the_twin_check_finds_the_twin_the_first_search_missed():
     off = dataclasses.replace(loc.config, search_twins=False)
     assert GlobalLocalizer(loc.index, off).twin_check(query, answer, verified, others,
                                                       clock) is answer
+
+
+def test_the_twin_check_of_several_regions_skips_answers_above_its_confidence():
+    loc, query, answer, verified, others, clock = _twin_answer(1, below=0.99)
+    assert loc.regions.count == 2 and answer.status == OK
+    # a simulated scan of a twin alone explains all of it: confident, so not checked
+    assert answer.confidence >= 0.99
+    assert loc.twin_check(query, answer, verified, others, clock) is answer
+    lower = dataclasses.replace(loc.config, search_twins_below=answer.confidence + 1e-6)
+    checked = GlobalLocalizer(loc.index, lower).twin_check(query, answer, verified, others, clock)
+    assert checked.status != OK and 'distinct poses fit' in checked.message
+    # the flip check of a map of one region does not ask the confidence
+    loc1, query1, answer1, verified1, others1, clock1 = _twin_answer(1, turned=True, below=0.0)
+    assert loc1.twin_check(query1, answer1, verified1, others1, clock1).status != OK
+
+
+def test_a_search_keeps_no_leaf_below_the_floor_it_is_given():
+    loc, query, answer, verified, others, clock = _twin_answer(1)
+    yaw = loc.laser_pose(answer.pose)[2]
+    plan = SearchPlan(np.array([yaw]), np.ones((1, loc.regions.count), bool), loc.regions.labels)
+    found = loc.search_hypotheses(query, plan)
+    assert len(found) >= 2                          # both twins
+    best = max(h.correlative for h in found)
+    assert loc.search_hypotheses(query, plan, min_score=min(best + 0.01, 1.0)) == []
+    assert all(h.correlative >= 0.9 * best
+               for h in loc.search_hypotheses(query, plan, min_score=0.9 * best))
 
 
 def test_the_twin_check_keeps_a_unique_answer():
