@@ -209,10 +209,9 @@ def _twin_answer(seed_b: int, turned: bool = False, below: float = 1.0) -> tuple
     Return a scan in building A of a campus whose building B is A's twin (``seed_b`` 1) or not (2).
 
     With the localizer (``search_twins`` on, every ``ok`` answer below ``below`` checked), the
-    query, the answer decided on A's place
-    alone (as when the search kept only one of two twins) and its places. ``turned``: B is
-    drawn turned by a half turn right beside A, so the map is one region (one building whose
-    two halves look alike turned round).
+    query, the answer decided on A's place alone (as when the search kept only one of two
+    twins) and its places. ``turned``: B is drawn turned by a half turn right beside A, so the
+    map is one region (one building whose two halves look alike turned round).
     """
     data = np.full((400, 1300), -1, np.int8)
     _building(data, 2.0, 4.0, 0.0, 1)
