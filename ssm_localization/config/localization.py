@@ -61,6 +61,14 @@ class LocalizerConfig:
                                            'region): the search once more at this many further '
                                            'alignment yaws, its places decided together with '
                                            'the first ones')
+    weak_min_inliers: int = param(4, 'a failed answer on a map of several regions gets a weak '
+                                     'look: the search once more in their own regions at the '
+                                     'yaws of the vote peaks whose RANSAC pose has this many '
+                                     'inliers or more but fewer than fine_min_inliers, its places '
+                                     'decided together with the first ones (0: off)')
+    weak_min_confidence: float = param(0.99, 'an answer the weak look turns ok stays ok only '
+                                             'with this confidence or more, after its twin '
+                                             'check (else ambiguous)')
     search_twins: bool = param(True, 'an ok answer on a map of several regions (a campus) is '
                                      'checked for twins: the search once more in every region '
                                      "at the answer's yaw and its flip, its places decided "
@@ -151,7 +159,7 @@ class LocalizerConfig:
                     'covariance_scale',
                     'sigma_d')
         nonnegative = ('vote_descriptor_dims', 'search_spread', 'search_alignments',
-                       'search_more_alignments',
+                       'search_more_alignments', 'weak_min_inliers',
                        'search_rivals', 'search_max_cells',
                        'refine_iterations', 'polish_iterations', 'surface_depth',
                        'search_min_score', 'contradiction_weight', 'max_contradicting',
@@ -162,7 +170,7 @@ class LocalizerConfig:
         if self.vote_workers != -1 and self.vote_workers < 1:
             raise ValueError(f'LocalizerConfig.vote_workers must be -1 (every core) or at least '
                              f'1, got {self.vote_workers!r}')
-        for name in ('min_confidence', 'search_twins_below'):
+        for name in ('min_confidence', 'search_twins_below', 'weak_min_confidence'):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f'LocalizerConfig.{name} must be in [0, 1], got '
                                  f'{getattr(self, name)!r}')

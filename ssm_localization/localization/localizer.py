@@ -14,7 +14,9 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
 5. correlative search (beyond the paper, ``correlative.py``): branch and bound over the whole
    map at the yaws of the best hypotheses and their flips, which finds the places the voting
    missed (typically a corridor whose position along it only far walls tell); an answer that
-   is not ``ok`` in the end gets a second look, the search at further yaws (``second_look``);
+   is not ``ok`` in the end gets a second look, the search at further yaws (``second_look``;
+   on a map of several regions a ``failed`` one gets a weak look instead, the search at the
+   yaws of the vote peaks too weak to be hypotheses, ``weak_look``);
    an ``ok`` one is checked for its look-alikes, the search at its yaw and its half turn over
    the whole map (``twin_check``: on a map of one region ``search_flips``; on a map of several,
    ``search_twins``, for an answer below ``search_twins_below``);
@@ -387,7 +389,8 @@ class GlobalLocalizer:
         clock.lap('prepare')
         if self.config.paper_mode:
             return self._paper(query, clock)
-        hyps = self.correlate(query, self.spectral_hypotheses(query, clock))
+        spectral, weak = self.spectral_peaks(query, clock)
+        hyps = self.correlate(query, spectral)
         seeds = [h.initial_pose for h in _by_correlation(hyps)]
         if self.config.search:
             found = self.search_hypotheses(query, self.search_plan(query, seeds))
@@ -402,6 +405,10 @@ class GlobalLocalizer:
         else:
             answer = self._failed(clock, 'no pose hypothesis: neither the pose votes nor the '
                                          'correlative search found a place that fits')
+        if answer.status == FAILED and weak:
+            again = self.weak_look(query, seeds, weak, verified, others, clock)
+            if again is not None:
+                return again
         return (self.second_look(query, seeds, verified, others, clock)
                 or replace(answer, latency_ms=clock.total_ms))
 
@@ -453,8 +460,53 @@ class GlobalLocalizer:
             return None
         return self.decide_again(query, found, verified, others, clock)
 
+    def weak_look(self, query: Query, seeds: list[Pose2], weak: list[Pose2],
+                  verified: list[Hypothesis], others: list[Hypothesis],
+                  clock: StageClock) -> Localization | None:
+        """
+        Return a ``failed`` answer decided again with the places at the weak peaks' yaws.
+
+        ``weak``: the RANSAC poses of the vote peaks with ``weak_min_inliers`` inliers or more
+        but fewer than ``fine_min_inliers`` (:meth:`spectral_peaks`). Only on a map of several
+        regions, where each region is searched at its own alignment yaws and at the yaws of the
+        hypotheses that lie in it (``SearchRegions.plan``): a building of a campus whose walls
+        the scan sees askew, with no hypothesis in it, is never searched at its right yaw. Here
+        each weak pose's region is searched at its yaw (and flip), those the first plan did not
+        search there; the places found join the first ones (a rival found before stays a
+        rival). An answer this turns ``ok`` is twin-checked whatever its confidence and stays
+        ``ok`` only from ``weak_min_confidence`` (0.99), else it is ``ambiguous``. Measured
+        without the bar (docs/EXPERIMENTS.md, 2026-12-03): on the campus benchmark 28 ``failed``
+        answers turned right (0.963-0.9996) and none wrong over two query draws (900 and 1770
+        scans, sharing some); on the 30 M-cell office over 16 query seeds one turned wrong, at
+        0.957, and none right; the bar keeps 25 of the campus's 28. None when there is nothing
+        to search or the map has one region (its ``second_look`` searches further alignments
+        everywhere).
+        """
+        cfg = self.config
+        if self.regions.count <= 1 or not cfg.search:
+            return None
+        plan = self.regions.plan(query.wall_angles, seeds, cfg, weak=weak)
+        if len(plan.yaws) == 0:
+            return None
+        found = self.correlate(query, self.search_hypotheses(query, plan))
+        clock.lap('search')
+        if not found:
+            return None
+        verified, more = self.examine(query, found, clock, before=verified)
+        answer = self.decide(query, verified, clock, others=more + others)
+        if answer.status != OK:
+            return replace(answer, latency_ms=clock.total_ms)
+        answer = self.twin_check(query, answer, verified, more + others, clock, always=True)
+        if answer.status == OK and answer.confidence < cfg.weak_min_confidence:
+            return replace(answer, status=AMBIGUOUS, latency_ms=clock.total_ms,
+                           message=f'a place only weak vote peaks led to, at a confidence of '
+                                   f'{answer.confidence:.3f}, below weak_min_confidence '
+                                   f'{cfg.weak_min_confidence:g}')
+        return replace(answer, latency_ms=clock.total_ms)
+
     def twin_check(self, query: Query, answer: Localization, verified: list[Hypothesis],
-                   others: list[Hypothesis], clock: StageClock) -> Localization:
+                   others: list[Hypothesis], clock: StageClock,
+                   always: bool = False) -> Localization:
         """
         Return an ``ok`` answer decided again with its twins: the search at its yaw everywhere.
 
@@ -485,7 +537,7 @@ class GlobalLocalizer:
         wanted = cfg.search_twins if several else cfg.search_flips
         if not (cfg.search and wanted) or answer.pose is None:
             return answer
-        if several and answer.confidence >= cfg.search_twins_below:
+        if several and answer.confidence >= cfg.search_twins_below and not always:
             return answer
         laser = self.laser_pose(answer.pose)
         yaws = np.array([laser[2], laser[2] + math.pi])
@@ -521,6 +573,17 @@ class GlobalLocalizer:
     def spectral_hypotheses(self, query: Query,
                             clock: StageClock | None = None) -> list[Hypothesis]:
         """Pose voting, spectral coarse ranking of the peaks (eq. 5), RANSAC fine pose."""
+        return self.spectral_peaks(query, clock)[0]
+
+    def spectral_peaks(self, query: Query, clock: StageClock | None = None
+                       ) -> tuple[list[Hypothesis], list[Pose2]]:
+        """
+        Return the spectral hypotheses and the weak peaks' RANSAC poses (laser, map frame).
+
+        A peak of the ``top_n`` whose RANSAC pose (eqs. 7-8) has ``fine_min_inliers`` inliers
+        becomes a hypothesis; one with ``weak_min_inliers`` or more but fewer is a weak peak
+        (``weak_look``; none when ``weak_min_inliers`` is 0).
+        """
         cfg = self.config
         feats = query.features
         votes = self.voting.vote(feats)
@@ -537,13 +600,15 @@ class GlobalLocalizer:
             clock.lap('coarse')
         rng = np.random.default_rng(self.matcher_config.seed)
         mc = self.matcher_config
-        out = []
+        out, weak = [], []
         for energy, members in scored[:cfg.top_n]:
             qi, mj = votes.qi[members], votes.mj[members]
             found = ransac_hypotheses(self.voting.points[mj], feats.points[qi],
                                       mc.ransac_threshold, cfg.fine_ransac_iterations, rng,
                                       mc.ransac_min_span)
             if not found or found[0][1].sum() < cfg.fine_min_inliers:
+                if found and 0 < cfg.weak_min_inliers <= found[0][1].sum():
+                    weak.append(tuple(float(v) for v in found[0][0]))
                 continue
             pose, inliers = found[0]
             node = int(np.bincount(self.voting.nodes[mj[inliers]]).argmax())
@@ -551,7 +616,7 @@ class GlobalLocalizer:
                                   spectral=float(energy)))
         if clock:
             clock.lap('fine')
-        return out
+        return out, weak
 
     def _peak_spectral(self, feats: ScanFeatures, votes: Votes, members: np.ndarray):
         """

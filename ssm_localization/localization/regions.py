@@ -149,7 +149,8 @@ class SearchRegions:
         return out
 
     def plan(self, scan_angles: np.ndarray, seeds: list[Pose2],
-             cfg: LocalizerConfig, more: bool = False) -> SearchPlan:
+             cfg: LocalizerConfig, more: bool = False,
+             weak: Sequence[Pose2] = ()) -> SearchPlan:
         """
         Return the yaws to search in each region.
 
@@ -160,7 +161,10 @@ class SearchRegions:
         steps of ``search_step``. With one region: the yaws of ``GlobalLocalizer.search_yaws``,
         in the same order. ``more`` (the second look at an answer that is not ``ok``): instead
         only the next ``search_more_alignments`` alignment yaws of every region, those the
-        first plan did not search.
+        first plan did not search. ``weak`` (the weak look at a ``failed`` answer, see
+        ``GlobalLocalizer.weak_look``): instead only the yaws of these poses (the RANSAC poses
+        of weak vote peaks), each in its own region (none when it lies in none), those the
+        first plan did not search there.
         """
         centres: list[tuple[float, int]] = []          # (yaw, region or -1: all)
         for pose in seeds:
@@ -170,6 +174,7 @@ class SearchRegions:
                 centres.append((yaw, region))
             if len(centres) >= cfg.search_seeds:
                 break
+        weak_regions = self.region_of(np.array([p[:2] for p in weak])) if len(weak) else []
         first = cfg.search_alignments
         aligned = self.alignment_yaws(scan_angles,
                                       first + (cfg.search_more_alignments if more else 0))
@@ -184,6 +189,11 @@ class SearchRegions:
                 for yaw in aligned[r][first:]:
                     if is_new_yaw(yaw, searched + mine, cfg.search_step):
                         mine.append(float(yaw))
+            elif len(weak):
+                searched, mine = mine, []
+                for pose, g in zip(weak, weak_regions):
+                    if g == r and is_new_yaw(float(pose[2]), searched + mine, cfg.search_step):
+                        mine.append(float(pose[2]))
             if not mine:
                 continue
             region_yaws = spread_yaws(mine, cfg)

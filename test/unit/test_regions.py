@@ -121,6 +121,56 @@ def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus
         assert apart(centres, first.yaws[first.allowed[:, r]]).min() > 0.0
 
 
+def test_the_weak_look_searches_each_weak_pose_in_its_own_region_at_new_yaws_only(campus):
+    occ, loc = campus
+    angles, ranges = _turned_scan(occ)
+    query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
+    cfg = loc.config
+    seeds = [(10.0, 10.0, 0.3)]
+    first = loc.regions.plan(query.wall_angles, seeds, cfg)
+    turned = int(loc.regions.region_of(np.array([TURNED_TRUTH[:2]]))[0])
+    seeded = int(loc.regions.region_of(np.array([seeds[0][:2]]))[0])
+    assert turned != seeded
+    x, y = TURNED_TRUTH[:2]
+    weak = [(x, y, 1.2), (x + 1.0, y, 1.2), (10.0, 10.0, 0.3 + math.pi), (-500.0, -500.0, 2.5)]
+    plan = loc.regions.plan(query.wall_angles, seeds, cfg, weak=weak)
+    # only the turned building, at the one weak yaw lying in it (twice: one search) and its flip
+    assert plan.allowed[:, turned].all() and plan.allowed.sum(axis=1).max() == 1
+    centres = np.array([1.2, 1.2 + math.pi])
+    apart = np.abs(wrap_angle(plan.yaws[:, None] - centres[None, :])).min(axis=1)
+    assert (apart <= cfg.search_spread + 1e-9).all() and len(plan.yaws) == len(
+        np.unique(np.round(plan.yaws, 9)))
+    # the seed's flip in its own region and a pose in no region add nothing; a yaw the first
+    # plan searched in that region is not searched again
+    assert loc.regions.plan(query.wall_angles, seeds, cfg, weak=weak[2:]).yaws.size == 0
+    done = first.yaws[first.allowed[:, turned]][0] + cfg.search_step / 2   # a searched centre
+    again = loc.regions.plan(query.wall_angles, seeds, cfg,
+                             weak=[(TURNED_TRUTH[0], TURNED_TRUTH[1], float(done))])
+    assert again.yaws.size == 0
+
+
+def test_a_failed_answer_gets_a_weak_look_whose_ok_needs_its_confidence(campus):
+    """With no hypothesis and no alignment search, only the weak peaks can find the place."""
+    occ, loc = campus
+    angles, ranges = _turned_scan(occ)
+    args = (ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
+    blind = dataclasses.replace(loc.config, search_alignments=0, fine_min_inliers=10 ** 6,
+                                weak_min_inliers=2)
+    looked = GlobalLocalizer(loc.index, blind)
+    hyps, weak = looked.spectral_peaks(looked.prepare_scan(*args))
+    assert hyps == [] and weak                  # every peak a weak one
+    answer = looked.localize_scan(*args)
+    assert answer.status == OK and answer.confidence >= blind.weak_min_confidence
+    assert math.hypot(answer.pose[0] - TURNED_TRUTH[0], answer.pose[1] - TURNED_TRUTH[1]) < 0.1
+    assert 'twins' in answer.stages             # checked for twins whatever its confidence
+    off = GlobalLocalizer(loc.index, dataclasses.replace(blind, weak_min_inliers=0))
+    assert off.localize_scan(*args).status == 'failed'
+    strict = GlobalLocalizer(loc.index, dataclasses.replace(blind, weak_min_confidence=1.0))
+    refused = strict.localize_scan(*args)
+    assert refused.status == 'ambiguous' and 'weak vote peaks' in refused.message
+    assert refused.pose == answer.pose
+
+
 def test_the_full_search_peer_searches_every_yaw_in_every_region(campus):
     """``bench localize --peer``'s package peer: the whole turn in both buildings, one answer."""
     occ, loc = campus
@@ -254,6 +304,9 @@ def test_the_twin_check_of_several_regions_skips_answers_above_its_confidence():
     # a simulated scan of a twin alone explains all of it: confident, so not checked
     assert answer.confidence >= 0.99
     assert loc.twin_check(query, answer, verified, others, clock) is answer
+    # ... but an answer the weak look found is checked whatever its confidence
+    forced = loc.twin_check(query, answer, verified, others, clock, always=True)
+    assert forced.status != OK and 'distinct poses fit' in forced.message
     lower = dataclasses.replace(loc.config, search_twins_below=answer.confidence + 1e-6)
     checked = GlobalLocalizer(loc.index, lower).twin_check(query, answer, verified, others, clock)
     assert checked.status != OK and 'distinct poses fit' in checked.message
