@@ -93,13 +93,18 @@ def test_scan_of_the_turned_building_is_searched_at_its_yaw_and_found(campus):
     assert math.hypot(loc_.pose[0] - truth[0], loc_.pose[1] - truth[1]) < 0.05
 
 
-def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus):
+def _first_plan(campus) -> tuple:
+    """Return the localizer, the turned building's query, one seed and the first plan."""
     occ, loc = campus
     angles, ranges = _turned_scan(occ)
     query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
-    cfg = loc.config
     seeds = [(10.0, 10.0, 0.3)]
-    first = loc.regions.plan(query.wall_angles, seeds, cfg)
+    return loc, query, seeds, loc.regions.plan(query.wall_angles, seeds, loc.config)
+
+
+def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus):
+    loc, query, seeds, first = _first_plan(campus)
+    cfg = loc.config
     more = loc.regions.plan(query.wall_angles, seeds, cfg, more=True)
     wider = loc.regions.alignment_yaws(
         query.wall_angles, cfg.search_alignments + cfg.search_more_alignments)
@@ -122,12 +127,8 @@ def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus
 
 
 def test_the_weak_look_searches_each_weak_pose_in_its_own_region_at_new_yaws_only(campus):
-    occ, loc = campus
-    angles, ranges = _turned_scan(occ)
-    query = loc.prepare_scan(ranges, angles[0], angles[1] - angles[0], 0.05, 30.0)
+    loc, query, seeds, first = _first_plan(campus)
     cfg = loc.config
-    seeds = [(10.0, 10.0, 0.3)]
-    first = loc.regions.plan(query.wall_angles, seeds, cfg)
     turned = int(loc.regions.region_of(np.array([TURNED_TRUTH[:2]]))[0])
     seeded = int(loc.regions.region_of(np.array([seeds[0][:2]]))[0])
     assert turned != seeded
