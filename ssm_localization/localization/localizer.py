@@ -486,8 +486,6 @@ class GlobalLocalizer:
         if self.regions.count <= 1 or not cfg.search:
             return None
         plan = self.regions.plan(query.wall_angles, seeds, cfg, weak=weak)
-        if len(plan.yaws) == 0:
-            return None
         found = self.correlate(query, self.search_hypotheses(query, plan))
         clock.lap('search')
         if not found:

@@ -224,6 +224,7 @@ def test_one_building_is_one_region_searched_as_before():
         assert np.array_equal(plan.yaws, loc.search_yaws(query, [h.initial_pose[2]
                                                                  for h in seeds]))
         assert plan.allowed.all()
+        assert loc.weak_look(query, [], [(0.0, 0.0, 0.0)], [], [], StageClock()) is None
 
 
 def test_leaves_and_refinement_keep_each_regions_best():
