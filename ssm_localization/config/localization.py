@@ -74,11 +74,17 @@ class LocalizerConfig:
                                      "at the answer's yaw and its flip, its places decided "
                                      'together with the first ones (a look-alike room '
                                      'elsewhere is a rival, not luck); costs latency')
-    search_twins_below: float = param(0.99, 'the twin check of maps of several regions runs '
-                                            'only for ok answers with a confidence below this '
-                                            '(1: every ok answer), and looks only for places '
-                                            "scoring 0.85 of the answer's own correlative "
-                                            'score or more')
+    search_twins_below: float = param(1.0, 'the twin check of maps of several regions runs '
+                                           'only for ok answers with a confidence below this '
+                                           '(1: every ok answer)')
+    search_twins_ratio: float = param(0.95, 'the twin check looks for places scoring this much '
+                                            "of the answer's own correlative score or more")
+    search_twins_beams: int = param(40, 'beams ray-cast at each place the twin check finds, to '
+                                        'rank them (a quick beam check)')
+    search_twins_keep: int = param(8, 'places of the twin check, best by the quick beam check, '
+                                      'refined and decided with the first ones')
+    search_twins_margin: float = param(0.05, 'only places whose quick beam check scores within '
+                                             "this of the answer's own are kept")
     search_flips: bool = param(True, 'an ok answer on a map of one region (a building) is '
                                      'checked for its flip: the search once more over the map '
                                      "at the answer's yaw and its half turn, its places decided "
@@ -152,7 +158,7 @@ class LocalizerConfig:
         positive = ('vote_neighbours', 'vote_bin_xy', 'vote_bin_yaw', 'vote_peaks', 'top_n',
                     'fine_ransac_iterations', 'fine_min_inliers', 'search_seeds', 'search_step',
                     'search_keep', 'search_depth', 'search_sigma', 'search_cell', 'search_budget',
-                    'search_points',
+                    'search_points', 'search_twins_beams',
                     'verify_beams', 'refine_hypotheses', 'verify_hypotheses', 'max_cast_range',
                     'surface_depth_std', 'beam_tolerance', 'score_sigma',
                     'distinct_xy', 'distinct_yaw', 'max_position_std', 'min_scan_extent',
@@ -160,7 +166,8 @@ class LocalizerConfig:
                     'sigma_d')
         nonnegative = ('vote_descriptor_dims', 'search_spread', 'search_alignments',
                        'search_more_alignments', 'weak_min_inliers',
-                       'search_rivals', 'search_max_cells',
+                       'search_rivals', 'search_max_cells', 'search_twins_keep',
+                       'search_twins_margin',
                        'refine_iterations', 'polish_iterations', 'surface_depth',
                        'search_min_score', 'contradiction_weight', 'max_contradicting',
                        'min_score', 'verify_margin', 'ambiguity_margin', 'rival_contradiction',
@@ -170,7 +177,8 @@ class LocalizerConfig:
         if self.vote_workers != -1 and self.vote_workers < 1:
             raise ValueError(f'LocalizerConfig.vote_workers must be -1 (every core) or at least '
                              f'1, got {self.vote_workers!r}')
-        for name in ('min_confidence', 'search_twins_below', 'weak_min_confidence'):
+        for name in ('min_confidence', 'search_twins_below', 'weak_min_confidence',
+                     'search_twins_ratio'):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f'LocalizerConfig.{name} must be in [0, 1], got '
                                  f'{getattr(self, name)!r}')

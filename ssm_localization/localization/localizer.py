@@ -19,7 +19,7 @@ Pipeline for one query scan (``LocalizerConfig`` names the knobs):
    yaws of the vote peaks too weak to be hypotheses, ``weak_look``);
    an ``ok`` one is checked for its look-alikes, the search at its yaw and its half turn over
    the whole map (``twin_check``: on a map of one region ``search_flips``; on a map of several,
-   ``search_twins``, for an answer below ``search_twins_below``);
+   ``search_twins``, its places ranked by a quick ray check, ``twin_places``);
 6. refinement (``refine.py``): Gauss-Newton on the map's wall surface, the surface offset
    estimated from the scan, on the even points, and once more from the optimum of every
    endpoint (the few even points alone can settle half a degree off); the explained fraction
@@ -57,8 +57,8 @@ from .evidence import (beam_fractions, covariance_stds, endpoint_evidence, Evide
 from .fusion import lever_arm_covariance
 from .map_layers import build_map_layers
 from .refine import refine_poses
-from .regions import (is_new_yaw, pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO,
-                      SearchPlan, spread_yaws, with_region_bests)
+from .regions import (is_new_yaw, pick_leaves, place_leaves, REGION_BATCH, REGION_HOT_BATCHES,
+                      REGION_RATIO, SearchPlan, spread_yaws, with_region_bests)
 from .verify import BeamCheck, check_beams
 from .voting import alignment_yaws, Votes
 from ..config.confidence import CONFIDENCE_MODEL, ConfidenceModel
@@ -78,6 +78,8 @@ from ..transforms import apply, compose, inverse, Pose2, wrap_angle
 OK, AMBIGUOUS, FAILED = 'ok', 'ambiguous', 'failed'
 STATUSES = (OK, AMBIGUOUS, FAILED)
 Status = Literal['ok', 'ambiguous', 'failed']
+#: the twin check's search returns at most this many leaves (places of a metre: ``twin_places``)
+TWIN_LEAVES = 4096
 
 
 class SparseScan(ValueError):
@@ -514,14 +516,13 @@ class GlobalLocalizer:
         bin off, and which of two twins the search keeps is luck. Here every region is searched
         at the answer's laser yaw and its flip (a room turned by a half turn); the places found
         join the first ones and the answer is decided on all of them, so a twin becomes the
-        rival it is. On a map of several regions (``search_twins``) only an answer below
-        ``search_twins_below`` (0.99) is checked, and only places scoring at least
-        ``REGION_RATIO`` of the answer's own correlative score are looked for (a twin fits about
-        as well; the floor lets the search prune): on the 30 M-cell office over three query
-        seeds it removed 3 of 4 wrong ``ok`` answers (7 right ones of 487 became ``ambiguous``,
-        twin rooms told apart by nothing in the scan), the campus's and the outdoor map's
-        answers the same, for 0-18 ms of p95 latency; on the tuning split no answer of 0.99 or
-        more was wrong (docs/EXPERIMENTS.md).
+        rival it is. On a map of several regions (``search_twins``) every ``ok`` answer is
+        checked (``search_twins_below``, 1.0: an answer from that confidence is not), for places
+        scoring at least ``search_twins_ratio`` of the answer's own correlative score, and the
+        places go on ranked by a quick ray check (:meth:`twin_places`). On the 30 M-cell office
+        over twelve query seeds it took the wrong ``ok`` answers from 11 to none, the right ones
+        from 1910 to 1901, where checking only answers below 0.99 and taking the places their
+        correlative score ranked best had left them (docs/EXPERIMENTS.md, 2026-12-03).
         A map of one region searches the seeds' yaws everywhere already, but a seed's yaw is
         the hypothesis's, up to a bin off the refined answer, and a room that fits turned round
         is kept or lost by the search's leaf cap: the check (``search_flips``, on by default)
@@ -535,25 +536,64 @@ class GlobalLocalizer:
         wanted = cfg.search_twins if several else cfg.search_flips
         if not (cfg.search and wanted) or answer.pose is None:
             return answer
-        if several and answer.confidence >= cfg.search_twins_below and not always:
+        if (several and not always and cfg.search_twins_below < 1.0
+                and answer.confidence >= cfg.search_twins_below):
             return answer
         laser = self.laser_pose(answer.pose)
         yaws = np.array([laser[2], laser[2] + math.pi])
         plan = SearchPlan(yaws, np.ones((len(yaws), self.regions.count), bool),
                           self.regions.labels)
-        floor = None
         if several:
-            own = self.grid.score_poses(_evenly(query.features.points, cfg.search_points),
-                                        np.array([laser]))[0]
-            floor = max(cfg.search_min_score, REGION_RATIO * float(own))
-        found = [h for h in self.correlate(query, self.search_hypotheses(query, plan,
-                                                                         min_score=floor))
-                 if distinct(self.base_pose(h.initial_pose), answer.pose, cfg.distinct_xy,
-                             cfg.distinct_yaw)]
+            found = self.twin_places(query, answer, plan)
+        else:
+            found = [h for h in self.correlate(query, self.search_hypotheses(query, plan))
+                     if distinct(self.base_pose(h.initial_pose), answer.pose, cfg.distinct_xy,
+                                 cfg.distinct_yaw)]
         clock.lap('twins')
         if not found:
             return replace(answer, latency_ms=clock.total_ms)
         return self.decide_again(query, found, verified, others, clock)
+
+    def twin_places(self, query: Query, answer: Localization,
+                    plan: SearchPlan) -> list[Hypothesis]:
+        """
+        Return the places of a twin search worth deciding with, best by a quick ray check first.
+
+        The search (``plan``: the answer's yaw and flip in every region) looks for places scoring
+        at least ``search_twins_ratio`` of the answer's own correlative score on the search's
+        points. On a campus it finds tens of them (office_30m's wrong answers: 39-151 places of
+        a metre, 22 a query on average at 0.95), most of them places where the scan's few
+        points lie on walls but its beams see through others; the twin that matters ranked
+        15th to 101st by that score, beyond the leaves :func:`pick_leaves` would keep. So the
+        best leaf of each place (:func:`place_leaves`) distinct from the answer is ray-cast
+        with ``search_twins_beams`` beams (``consistent - contradiction_weight x
+        contradicting``, as :meth:`verify` scores), and the ``search_twins_keep`` best that
+        score within ``search_twins_margin`` of the answer's own check go on.
+        """
+        cfg = self.config
+        pts = _evenly(query.features.points, cfg.search_points)
+        laser = self.laser_pose(answer.pose)
+        own = self.grid.score_poses(pts, np.array([laser]))[0]
+        floor = max(cfg.search_min_score, cfg.search_twins_ratio * float(own))
+        found = self.grid.search(pts, yaws=plan.yaws, min_score=floor, ratio=cfg.search_ratio,
+                                 budget_s=cfg.search_budget, max_leaves=TWIN_LEAVES,
+                                 regions=plan.regions, region_ratio=REGION_RATIO,
+                                 batch=REGION_BATCH, hot_batches=REGION_HOT_BATCHES)
+        leaves = [int(i) for i in place_leaves(found.poses)
+                  if distinct(self.base_pose(tuple(found.poses[i])), answer.pose,
+                              cfg.distinct_xy, cfg.distinct_yaw)]
+        if not leaves:
+            return []
+        angles, measured = query.picked_beams(cfg.search_twins_beams, cfg.max_cast_range)
+        checks = self._checks([laser] + [tuple(found.poses[i]) for i in leaves], angles,
+                              measured, query.range_max)
+        quick = np.array([c.consistent - cfg.contradiction_weight * c.contradicting
+                          for c in checks])
+        order = np.lexsort((-found.scores[leaves], -quick[1:]))[:cfg.search_twins_keep]
+        keep = [leaves[k] for k in order if quick[1 + k] >= quick[0] - cfg.search_twins_margin]
+        return self.correlate(query, [
+            Hypothesis(source='search', initial_pose=tuple(float(v) for v in found.poses[i]),
+                       correlative=float(found.scores[i])) for i in keep])
 
     def decide_again(self, query: Query, found: list[Hypothesis], verified: list[Hypothesis],
                      others: list[Hypothesis], clock: StageClock) -> Localization:

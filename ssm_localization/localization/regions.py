@@ -53,6 +53,8 @@ REGION_HOT_BATCHES = 1
 #: after a regional search, leaves this far (metres) from every leaf taken are other places:
 #: up to ``search_keep`` of them are taken too, as the rivals a look-alike answer must beat
 PLACE_APART = 3.0
+#: the twin check keeps one leaf (its best) of each cell this wide (metres) and yaw: a place
+PLACE_CELL = 1.0
 
 
 @dataclass(frozen=True)
@@ -274,6 +276,29 @@ def pick_leaves(found: CorrelativeResult, keep: int,
         poses.append(pose)
         taken.add(region)
     return out
+
+
+def place_leaves(poses: np.ndarray, cell: float = PLACE_CELL) -> np.ndarray:
+    """
+    Return the index of the best leaf of each place among ``poses`` (L, 3), best first.
+
+    Leaves come best first (``CorrelativeResult``). A leaf within ``cell`` metres of a better
+    one at the same yaw is the same place: first the best leaf of each ``cell`` x ``cell`` square
+    and yaw, then those squares' leaves merged greedily (a place on a square's edge is one).
+    """
+    poses = np.asarray(poses, float).reshape(-1, 3)
+    if not len(poses):
+        return np.zeros(0, np.int64)
+    keys = np.column_stack((np.floor(poses[:, :2] / cell), np.round(poses[:, 2], 6)))
+    first = np.sort(np.unique(keys, axis=0, return_index=True)[1])
+    p = poses[first]
+    near = ((np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1]) < cell)
+            & (np.abs(wrap_angle(p[:, None, 2] - p[None, :, 2])) < 1e-6))
+    merged = np.zeros(len(first), bool)
+    for i in range(len(first)):
+        if not merged[i]:
+            merged[i + 1:] |= near[i, i + 1:]
+    return first[~merged]
 
 
 T = TypeVar('T')

@@ -14,7 +14,8 @@ from ssm_localization.localization.correlative import CorrelativeResult
 from ssm_localization.localization.localizer import (_by_correlation, Hypothesis, OK,
                                                      StageClock)
 from ssm_localization.localization.regions import (
-    pick_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, SearchPlan, with_region_bests)
+    pick_leaves, place_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, SearchPlan,
+    with_region_bests)
 from ssm_localization.mapping.raycast import beam_angles, cast_rays
 from ssm_localization.transforms import apply, wrap_angle
 
@@ -306,6 +307,10 @@ def test_the_twin_check_of_several_regions_skips_answers_above_its_confidence():
     # a simulated scan of a twin alone explains all of it: confident, so not checked
     assert answer.confidence >= 0.99
     assert loc.twin_check(query, answer, verified, others, clock) is answer
+    # ... which the default (1.0: every ok answer) does check
+    assert LocalizerConfig().search_twins_below == 1.0
+    default = GlobalLocalizer(loc.index, dataclasses.replace(loc.config, search_twins_below=1.0))
+    assert default.twin_check(query, answer, verified, others, clock).status != OK
     # ... but an answer the weak look found is checked whatever its confidence
     forced = loc.twin_check(query, answer, verified, others, clock, always=True)
     assert forced.status != OK and 'distinct poses fit' in forced.message
@@ -327,6 +332,33 @@ def test_a_search_keeps_no_leaf_below_the_floor_it_is_given():
     assert loc.search_hypotheses(query, plan, min_score=min(best + 0.01, 1.0)) == []
     assert all(h.correlative >= 0.9 * best
                for h in loc.search_hypotheses(query, plan, min_score=0.9 * best))
+
+
+def test_a_place_is_the_best_leaf_of_its_metre_at_its_yaw():
+    poses = np.array([(0.9, 0.9, 0.0), (1.05, 0.92, 0.0), (5.0, 5.0, 0.0), (0.9, 0.9, math.pi),
+                      (0.95, 0.1, 0.0), (2.5, 0.9, 0.0)])
+    # best first: the second leaf lies across a square's edge from the first, the fifth in the
+    # first's square (both the first's place), the fourth at another yaw, the last 1.6 m away
+    assert place_leaves(poses, 1.0).tolist() == [0, 2, 3, 5]
+    assert place_leaves(np.zeros((0, 3))).tolist() == []
+
+
+def test_the_twin_check_ranks_its_places_by_a_quick_ray_check():
+    for seed_b, twins in ((1, 1), (2, 0)):
+        loc, query, answer, verified, others, clock = _twin_answer(seed_b)
+        laser = loc.laser_pose(answer.pose)
+        plan = SearchPlan(np.array([laser[2], laser[2] + math.pi]),
+                          np.ones((2, loc.regions.count), bool), loc.regions.labels)
+        places = loc.twin_places(query, answer, plan)
+        # the twin building's room is one place; the other building's places score fairly on
+        # the search's points but see through its walls, and are not kept
+        assert len(places) == twins
+        if twins:
+            assert math.hypot(places[0].initial_pose[0] - 48.0,
+                              places[0].initial_pose[1] - 7.0) < 0.1
+            none = GlobalLocalizer(loc.index, dataclasses.replace(loc.config,
+                                                                  search_twins_keep=0))
+            assert none.twin_places(query, answer, plan) == []
 
 
 def test_the_twin_check_keeps_a_unique_answer():
