@@ -24,6 +24,7 @@ from typing import TypeVar
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from . import voting
 from .correlative import CorrelativeGrid, CorrelativeResult
@@ -292,12 +293,14 @@ def place_leaves(poses: np.ndarray, cell: float = PLACE_CELL) -> np.ndarray:
     keys = np.column_stack((np.floor(poses[:, :2] / cell), np.round(poses[:, 2], 6)))
     first = np.sort(np.unique(keys, axis=0, return_index=True)[1])
     p = poses[first]
-    near = ((np.hypot(p[:, None, 0] - p[None, :, 0], p[:, None, 1] - p[None, :, 1]) < cell)
-            & (np.abs(wrap_angle(p[:, None, 2] - p[None, :, 2])) < 1e-6))
+    # pairs of squares' leaves within a cell of each other at one yaw (i < j: i is the better)
+    pairs = cKDTree(p[:, :2]).query_pairs(cell, output_type='ndarray')
+    pairs = pairs[np.abs(wrap_angle(p[pairs[:, 0], 2] - p[pairs[:, 1], 2])) < 1e-6]
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
     merged = np.zeros(len(first), bool)
-    for i in range(len(first)):
+    for i, j in pairs:
         if not merged[i]:
-            merged[i + 1:] |= near[i, i + 1:]
+            merged[j] = True
     return first[~merged]
 
 
