@@ -562,7 +562,7 @@ class GlobalLocalizer:
         The search (``plan``: the answer's yaw and flip in every region) looks for places scoring
         at least ``search_twins_ratio`` of the answer's own correlative score on the search's
         points. On a campus it finds tens of them (office_30m's wrong answers: 39-151 places of
-        a metre, 22 a query on average at 0.95), most of them places where the scan's few
+        a metre, 15-22 a query on average at 0.95), most of them places where the scan's few
         points lie on walls but its beams see through others; the twin that matters ranked
         15th to 101st by that score, beyond the leaves :func:`pick_leaves` would keep. So the
         best leaf of each place (:func:`place_leaves`) distinct from the answer is ray-cast
