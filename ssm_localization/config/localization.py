@@ -75,8 +75,8 @@ class LocalizerConfig:
                                      'together with the first ones (a look-alike room '
                                      'elsewhere is a rival, not luck); costs latency')
     search_twins_below: float = param(1.0, 'the twin check of maps of several regions runs '
-                                           'only for ok answers with a confidence below this '
-                                           '(1: every ok answer)')
+                                           'only for ok answers with a confidence of at most '
+                                           'this (1: every ok answer)')
     search_twins_ratio: float = param(0.95, 'the twin check looks for places scoring this much '
                                             "of the answer's own correlative score or more")
     search_twins_beams: int = param(40, 'beams ray-cast at each place the twin check finds, to '

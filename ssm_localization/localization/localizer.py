@@ -517,7 +517,7 @@ class GlobalLocalizer:
         at the answer's laser yaw and its flip (a room turned by a half turn); the places found
         join the first ones and the answer is decided on all of them, so a twin becomes the
         rival it is. On a map of several regions (``search_twins``) every ``ok`` answer is
-        checked (``search_twins_below``, 1.0: an answer from that confidence is not), for places
+        checked (an answer above ``search_twins_below``, 1.0 by default, is not), for places
         scoring at least ``search_twins_ratio`` of the answer's own correlative score, and the
         places go on ranked by a quick ray check (:meth:`twin_places`). On the 30 M-cell office
         over twelve query seeds it took the wrong ``ok`` answers from 11 to none, the right ones
@@ -536,8 +536,7 @@ class GlobalLocalizer:
         wanted = cfg.search_twins if several else cfg.search_flips
         if not (cfg.search and wanted) or answer.pose is None:
             return answer
-        if (several and not always and cfg.search_twins_below < 1.0
-                and answer.confidence >= cfg.search_twins_below):
+        if several and not always and answer.confidence > cfg.search_twins_below:
             return answer
         laser = self.laser_pose(answer.pose)
         yaws = np.array([laser[2], laser[2] + math.pi])

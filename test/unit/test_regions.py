@@ -314,6 +314,9 @@ def test_the_twin_check_of_several_regions_skips_answers_above_its_confidence():
     # ... but an answer the weak look found is checked whatever its confidence
     forced = loc.twin_check(query, answer, verified, others, clock, always=True)
     assert forced.status != OK and 'distinct poses fit' in forced.message
+    at = dataclasses.replace(loc.config, search_twins_below=answer.confidence)   # at most: on
+    assert GlobalLocalizer(loc.index, at).twin_check(query, answer, verified, others,
+                                                     clock).status != OK
     lower = dataclasses.replace(loc.config, search_twins_below=answer.confidence + 1e-6)
     checked = GlobalLocalizer(loc.index, lower).twin_check(query, answer, verified, others, clock)
     assert checked.status != OK and 'distinct poses fit' in checked.message
