@@ -56,7 +56,7 @@ from .evidence import (beam_fractions, covariance_stds, endpoint_evidence, Evide
                        rival_counts)
 from .fusion import lever_arm_covariance
 from .map_layers import build_map_layers
-from .refine import refine_poses
+from .refine import refine_poses, RefineResult
 from .regions import (is_new_yaw, pick_leaves, place_leaves, REGION_BATCH, REGION_HOT_BATCHES,
                       REGION_RATIO, SearchPlan, spread_yaws, with_region_bests)
 from .verify import BeamCheck, check_beams
@@ -565,9 +565,9 @@ class GlobalLocalizer:
         points lie on walls but its beams see through others; the twin that matters ranked
         15th to 101st by that score, beyond the leaves :func:`pick_leaves` would keep. So the
         best leaf of each place (:func:`place_leaves`) distinct from the answer is ray-cast
-        with ``search_twins_beams`` beams (``consistent - contradiction_weight x
-        contradicting``, as :meth:`verify` scores), and the ``search_twins_keep`` best that
-        score within ``search_twins_margin`` of the answer's own check go on.
+        with ``search_twins_beams`` beams (:meth:`quick_checks`), and the
+        ``search_twins_keep`` best that score within ``search_twins_margin`` of the answer's
+        own check go on.
         """
         cfg = self.config
         pts = _evenly(query.features.points, cfg.search_points)
@@ -583,16 +583,37 @@ class GlobalLocalizer:
                               cfg.distinct_xy, cfg.distinct_yaw)]
         if not leaves:
             return []
+        own_check, quick, poses = self.quick_checks(query, laser, found.poses[leaves])
+        order = np.lexsort((-found.scores[leaves], -quick))[:cfg.search_twins_keep]
+        keep = [k for k in order if quick[k] >= own_check - cfg.search_twins_margin]
+        return self.correlate(query, [
+            Hypothesis(source='search', initial_pose=tuple(float(v) for v in poses[k]),
+                       correlative=float(found.scores[leaves[k]])) for k in keep])
+
+    def quick_checks(self, query: Query, laser: Pose2, leaves: np.ndarray
+                     ) -> tuple[float, np.ndarray, np.ndarray]:
+        """
+        Return the quick ray check of the answer at ``laser`` and of each place, and its pose.
+
+        ``search_twins_beams`` beams, scored ``consistent - contradiction_weight x
+        contradicting`` as :meth:`verify` scores. A place (laser poses ``leaves``, ``(n, 3)``)
+        is cast at its leaf and at the leaf refined once on the spatially even points, and keeps
+        the better of the two with its pose: a leaf lies up to half a search cell and half a
+        yaw step off, and a narrow laser's long beams then miss their walls (office_30m, a 90°
+        scan whose truth's leaf the check dropped for a twin), while a refinement from the
+        leaf alone can settle in another basin (another 90° scan, whose rival only its leaf
+        kept). Measured in docs/EXPERIMENTS.md (2026-12-03, session 58).
+        """
+        cfg = self.config
         angles, measured = query.picked_beams(cfg.search_twins_beams, cfg.max_cast_range)
-        checks = self._checks([laser] + [tuple(found.poses[i]) for i in leaves], angles,
+        refined = np.array([r.pose for r in self._gauss_newton(query.features.points, leaves)])
+        checks = self._checks([laser, *map(tuple, leaves), *map(tuple, refined)], angles,
                               measured, query.range_max)
         quick = np.array([c.consistent - cfg.contradiction_weight * c.contradicting
                           for c in checks])
-        order = np.lexsort((-found.scores[leaves], -quick[1:]))[:cfg.search_twins_keep]
-        keep = [leaves[k] for k in order if quick[1 + k] >= quick[0] - cfg.search_twins_margin]
-        return self.correlate(query, [
-            Hypothesis(source='search', initial_pose=tuple(float(v) for v in found.poses[i]),
-                       correlative=float(found.scores[i])) for i in keep])
+        at_leaf, once = quick[1:1 + len(leaves)], quick[1 + len(leaves):]
+        poses = np.where((once > at_leaf)[:, None], refined, leaves)
+        return float(quick[0]), np.maximum(at_leaf, once), poses
 
     def decide_again(self, query: Query, found: list[Hypothesis], verified: list[Hypothesis],
                      others: list[Hypothesis], clock: StageClock) -> Localization:
@@ -765,25 +786,28 @@ class GlobalLocalizer:
         todo = hyps[:limit] if limit is not None else self.to_refine(hyps)
         if not todo:
             return []
-
-        def gauss_newton(points, starts, truncate=cfg.refine_radius):
-            return refine_poses(self.surface, points, np.asarray(starts),
-                                iterations=cfg.refine_iterations, truncate=truncate,
-                                estimate_depth=cfg.estimate_depth,
-                                depth_prior=cfg.surface_depth_std, score_sigma=cfg.score_sigma)
-
         starts = [h.initial_pose for h in todo]
-        results = gauss_newton(query.features.points, starts)
+        results = self._gauss_newton(query.features.points, starts)
         if basin:
-            wide = gauss_newton(query.points, starts)
-            again = gauss_newton(query.features.points, [r.pose for r in wide],
-                                 (cfg.refine_radius[1], cfg.refine_radius[1]))
+            wide = self._gauss_newton(query.points, starts)
+            again = self._gauss_newton(query.features.points, [r.pose for r in wide],
+                                       (cfg.refine_radius[1], cfg.refine_radius[1]))
             results = [b if b.explained > a.explained else a for a, b in zip(results, again)]
         done = [replace(h, laser_pose=r.pose, explained=r.explained, depth=r.depth, refined=True,
                         score=r.explained, pose=self.base_pose(r.pose),
                         covariance=self.report_covariance(r.covariance, r.pose))
                 for h, r in zip(todo, results)]
         return _merged(sorted(done, key=lambda h: -h.explained), lambda h: h.laser_pose)
+
+    def _gauss_newton(self, points: np.ndarray, starts,
+                      truncate: tuple[float, float] | None = None) -> list[RefineResult]:
+        """Return the laser poses ``starts`` refined on the wall surface with ``points``."""
+        cfg = self.config
+        return refine_poses(self.surface, points, np.asarray(starts),
+                            iterations=cfg.refine_iterations,
+                            truncate=cfg.refine_radius if truncate is None else truncate,
+                            estimate_depth=cfg.estimate_depth, depth_prior=cfg.surface_depth_std,
+                            score_sigma=cfg.score_sigma)
 
     def verify_contenders(self, query: Query, refined: list[Hypothesis],
                           first: int | None = None, margin: float | None = None,

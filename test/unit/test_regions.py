@@ -364,6 +364,23 @@ def test_the_twin_check_ranks_its_places_by_a_quick_ray_check():
             assert none.twin_places(query, answer, plan) == []
 
 
+def test_the_quick_check_casts_a_place_at_its_leaf_and_refined_once():
+    loc, query, answer, verified, others, clock = _twin_answer(1)
+    laser = loc.laser_pose(answer.pose)
+    twin = np.array(laser) + (40.0, 0.0, 0.0)                # B's room, A's 40 m to the right
+    off = twin + (0.08, -0.06, math.radians(1.5))            # a leaf further off than a coarse one
+    own, quick, poses = loc.quick_checks(query, laser, np.array([twin, off]))
+    assert quick[0] == pytest.approx(own, abs=0.05)          # the twin checks as the answer
+    # cast at the leaf alone the room scores less; refined once it scores as the room does
+    cfg = loc.config
+    angles, measured = query.picked_beams(cfg.search_twins_beams, cfg.max_cast_range)
+    at_leaf = loc._checks([tuple(off)], angles, measured, query.range_max)[0]
+    assert at_leaf.consistent - cfg.contradiction_weight * at_leaf.contradicting < quick[1]
+    assert quick[1] == pytest.approx(own, abs=0.05)
+    assert math.hypot(*(poses[1][:2] - twin[:2])) < 0.03
+    assert abs(wrap_angle(poses[1][2] - twin[2])) < math.radians(0.3)
+
+
 def test_the_twin_check_keeps_a_unique_answer():
     loc, query, answer, verified, others, clock = _twin_answer(2)
     assert answer.status == OK
