@@ -586,9 +586,9 @@ class GlobalLocalizer:
         own_check, quick, poses = self.quick_checks(query, laser, found.poses[leaves])
         order = np.lexsort((-found.scores[leaves], -quick))[:cfg.search_twins_keep]
         keep = [k for k in order if quick[k] >= own_check - cfg.search_twins_margin]
-        return self.correlate(query, [
-            Hypothesis(source='search', initial_pose=tuple(float(v) for v in poses[k]),
-                       correlative=float(found.scores[leaves[k]])) for k in keep])
+        return self.correlate(query, [   # scored on every point of the scan, as the first look
+            Hypothesis(source='search', initial_pose=tuple(float(v) for v in poses[k]))
+            for k in keep])
 
     def quick_checks(self, query: Query, laser: Pose2, leaves: np.ndarray
                      ) -> tuple[float, np.ndarray, np.ndarray]:
