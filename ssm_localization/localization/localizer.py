@@ -328,6 +328,10 @@ class GlobalLocalizer:
         """Return the laser pose in the map frame given the base's."""
         return compose(base_pose, self.config.laser_pose)
 
+    def apart(self, a: Pose2, b: Pose2) -> bool:
+        """Tell whether two base poses are distinct places (``distinct_xy``, ``distinct_yaw``)."""
+        return distinct(a, b, self.config.distinct_xy, self.config.distinct_yaw)
+
     # -- entry points -----------------------------------------------------------------------
     def localize_scan(self, ranges, angle_min: float, angle_increment: float,
                       range_min: float = 0.0, range_max: float = float('inf')) -> Localization:
@@ -546,8 +550,7 @@ class GlobalLocalizer:
             found = self.twin_places(query, answer, plan)
         else:
             found = [h for h in self.correlate(query, self.search_hypotheses(query, plan))
-                     if distinct(self.base_pose(h.initial_pose), answer.pose, cfg.distinct_xy,
-                                 cfg.distinct_yaw)]
+                     if self.apart(self.base_pose(h.initial_pose), answer.pose)]
         clock.lap('twins')
         if not found:
             return replace(answer, latency_ms=clock.total_ms)
@@ -579,8 +582,7 @@ class GlobalLocalizer:
                                  regions=plan.regions, region_ratio=REGION_RATIO,
                                  batch=REGION_BATCH, hot_batches=REGION_HOT_BATCHES)
         leaves = [int(i) for i in place_leaves(found.poses)
-                  if distinct(self.base_pose(tuple(found.poses[i])), answer.pose,
-                              cfg.distinct_xy, cfg.distinct_yaw)]
+                  if self.apart(self.base_pose(tuple(found.poses[i])), answer.pose)]
         if not leaves:
             return []
         own_check, quick, poses = self.quick_checks(query, laser, found.poses[leaves])
@@ -945,9 +947,8 @@ class GlobalLocalizer:
         if it was not yet (and so returned in ``hyps``), so the margin of the answer
         (``evidence.py``) is always measured against a ray-cast rival.
         """
-        cfg = self.config
-        others = [k for k, h in enumerate(hyps) if h is not best and h.refined
-                  and distinct(h.pose, best.pose, cfg.distinct_xy, cfg.distinct_yaw)]
+        others = [k for k, h in enumerate(hyps)
+                  if h is not best and h.refined and self.apart(h.pose, best.pose)]
         if not others:
             return [], hyps
         top = max(others, key=lambda k: hyps[k].explained)

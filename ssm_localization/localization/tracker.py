@@ -58,7 +58,7 @@ import numpy as np
 from .confidence import confidence, within_right
 from .evidence import covariance_stds, Evidence
 from .fusion import fuse_weak, lever_arm_covariance, mahalanobis2
-from .localizer import (AMBIGUOUS, distinct, FAILED, GlobalLocalizer, Hypothesis, Localization,
+from .localizer import (AMBIGUOUS, FAILED, GlobalLocalizer, Hypothesis, Localization,
                         OK, position_std, Query, SparseScan, Status, STATUSES)
 from .motion import check_pose, Increment, predict_parts
 from .noise import NoiseScale
@@ -311,11 +311,9 @@ class Tracker:
         fused = self._verified(query, best, pose)
         if not self._plausible(fused):
             fused, pose, cov = best, best.pose, best.covariance     # the scan's own pose
-        lc = loc.config
         # the evidence of the tracked pose, judged as a global answer is (the prediction's
         # part: the fused covariance; rivals: the distinct poses verified in the window)
-        others = [h.score for h in verified if h is not best
-                  and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)]
+        others = [h.score for h in verified if h is not best and loc.apart(h.pose, best.pose)]
         evidence = loc.evidence(query, fused, others)
         stds = covariance_stds(cov)
         evidence = replace(evidence, position_std=stds[0], yaw_std=stds[1],
@@ -327,7 +325,7 @@ class Tracker:
                   'scan_covariance': best.covariance}
         rivals = [h for h, m2 in contenders if h is not best
                   and m2 <= best_m2 + cfg.rival_prior_chi2
-                  and distinct(h.pose, best.pose, lc.distinct_xy, lc.distinct_yaw)
+                  and loc.apart(h.pose, best.pose)
                   and mahalanobis2(h.pose, best.pose, h.covariance + best.covariance)
                   > cfg.rival_chi2]
         if rivals:
@@ -392,16 +390,14 @@ class Tracker:
         ``ambiguous``.
         """
         cfg, loc = self.config, self.localizer
-        lc = loc.config
         yaws = loc.search_yaws(query, [loc.laser_pose(attempt.pose)[2]])
         others = [h for h in loc.search_hypotheses(query, yaws)
-                  if distinct(loc.base_pose(h.initial_pose), attempt.pose, lc.distinct_xy,
-                              lc.distinct_yaw)]
+                  if loc.apart(loc.base_pose(h.initial_pose), attempt.pose)]
         rival = None
         if others:
             refined = loc.refine(query, others, limit=cfg.check_hypotheses)
-            refined = loc.verify(query, [h for h in refined if distinct(
-                h.pose, attempt.pose, lc.distinct_xy, lc.distinct_yaw)][:2])
+            refined = loc.verify(query, [h for h in refined
+                                         if loc.apart(h.pose, attempt.pose)][:2])
             rival = max(refined, key=lambda h: h.score, default=None)
         if rival is None or rival.score < attempt.score + cfg.switch_margin:
             found = 'no other place' if rival is None else f'elsewhere {rival.score:.2f}'
@@ -410,8 +406,7 @@ class Tracker:
         glob = loc.localize_query(query)
         why = (f'{note}the tracked pose fits poorly (score {attempt.score:.2f}) and another place '
                f'better (score {rival.score:.2f}): ')
-        if glob.status == OK and distinct(glob.pose, attempt.pose, lc.distinct_xy,
-                                          lc.distinct_yaw):
+        if glob.status == OK and loc.apart(glob.pose, attempt.pose):
             return self._adopt(t0, stamp, glob, why + 'kidnapped? relocalized: ', pred)
         if glob.status == OK:
             return self._keep(t0, stamp, attempt, pred, why + 'global localization confirms '

@@ -326,6 +326,20 @@ def test_with_laser_pose_shares_the_map_and_moves_the_base(depot, offset_sim, lo
     _assert_close(out, base, xy=0.01, yaw_deg=0.2)
 
 
+def test_places_are_apart_beyond_the_distinct_thresholds(depot):
+    """``apart``: further than ``distinct_xy`` metres or ``distinct_yaw`` radians, yaw wrapped."""
+    loc = GlobalLocalizer(depot[1], LocalizerConfig(distinct_xy=0.5,
+                                                    distinct_yaw=math.radians(10.0)))
+    here = (2.0, 3.0, math.pi - 0.01)
+    assert not loc.apart(here, (2.3, 3.3, math.pi - 0.1))               # 0.42 m, 5.2 deg
+    assert loc.apart(here, (2.4, 3.4, math.pi - 0.01))                  # 0.57 m
+    assert loc.apart(here, (2.0, 3.0, math.pi - 0.2))                   # 10.9 deg
+    assert not loc.apart(here, (2.0, 3.0, -math.pi + 0.1))              # 6.3 deg across pi
+    moved = loc.with_laser_pose(OFFSET)     # base poses: the laser's mounting plays no part
+    assert moved.apart(here, (2.4, 3.4, math.pi - 0.01))
+    assert not moved.apart(here, (2.3, 3.3, math.pi - 0.1))
+
+
 def test_without_laser_pose_the_answer_is_the_laser_frame(depot, offset_sim, localizer):
     scan, laser = offset_sim.scans[0], offset_sim.sensor_poses[0]
     out = localizer.localize_scan(scan.ranges, scan.angle_min, scan.angle_increment,
