@@ -598,7 +598,7 @@ class GlobalLocalizer:
         Return the quick ray check of the answer at ``laser`` and of each place, and its pose.
 
         ``search_twins_beams`` beams, scored ``consistent - contradiction_weight x
-        contradicting`` as :meth:`verify` scores. A place (laser poses ``leaves``, ``(n, 3)``)
+        contradicting`` (``BeamCheck.score``). A place (laser poses ``leaves``, ``(n, 3)``)
         is cast at its leaf and at the leaf refined once on the spatially even points, and keeps
         the better of the two with its pose: a leaf lies up to half a search cell and half a
         yaw step off, and a narrow laser's long beams then miss their walls (office_30m, a 90°
@@ -611,8 +611,7 @@ class GlobalLocalizer:
         refined = np.array([r.pose for r in self._gauss_newton(query.features.points, leaves)])
         checks = self._checks([laser, *map(tuple, leaves), *map(tuple, refined)], angles,
                               measured, query.range_max)
-        quick = np.array([c.consistent - cfg.contradiction_weight * c.contradicting
-                          for c in checks])
+        quick = np.array([c.score(cfg.contradiction_weight) for c in checks])
         at_leaf, once = quick[1:1 + len(leaves)], quick[1 + len(leaves):]
         poses = np.where((once > at_leaf)[:, None], refined, leaves)
         return float(quick[0]), np.maximum(at_leaf, once), poses

@@ -30,9 +30,9 @@ class BeamCheck:
     shorts: int = 0       # returns in front of the map's wall
     missing: int = 0      # no return where the map has a wall well within the sensor's range
 
-    @property
-    def score(self) -> float:
-        return self.consistent - 2.0 * self.contradicting
+    def score(self, contradiction_weight: float) -> float:
+        """Return ``consistent - contradiction_weight x contradicting`` (``LocalizerConfig``)."""
+        return self.consistent - contradiction_weight * self.contradicting
 
 
 def check_beams(measured: np.ndarray, expected: np.ndarray, tol: float = 0.15,

@@ -214,7 +214,8 @@ def test_check_beams_classification():
     assert c.consistent == pytest.approx(4 / 8)
     assert c.contradicting == pytest.approx(2 / 8)
     assert c.short == pytest.approx(1 / 8)
-    assert c.score == pytest.approx(4 / 8 - 2 * 2 / 8)
+    assert c.score(2.0) == pytest.approx(4 / 8 - 2 * 2 / 8)
+    assert c.score(1.0) == pytest.approx(4 / 8 - 2 / 8)
 
 
 def test_check_beams_tolerance_edges():
@@ -230,8 +231,8 @@ def test_check_beams_empty_and_nan_do_not_crash():
     assert (c.consistent, c.contradicting, c.short) == (0.0, 0.0, 0.0)
     c = check_beams(np.array([np.nan, 1.0]), np.array([1.0, 1.0]))
     assert c.consistent == 0.5 and c.contradicting == 0.0 and c.short == 0.0
-    assert c.score == 0.5            # a NaN beam counts as neither agreeing nor contradicting
-    assert BeamCheck(0.5, 0.25, 0.0).score == 0.0
+    assert c.score(1.0) == 0.5       # a NaN beam counts as neither agreeing nor contradicting
+    assert BeamCheck(0.5, 0.25, 0.0).score(2.0) == 0.0
 
 
 def test_batched_refinement_equals_single(depot_clean):
