@@ -47,6 +47,9 @@ class LocalizerConfig:
     search_rivals: int = param(8, 'after a search of several regions (a campus): further leaves, '
                                   'each another place, added as the rivals of the answer')
     search_depth: int = param(4, 'levels of the branch and bound (top windows 2^depth cells)')
+    search_workers: int = param(2, 'threads the scoring of the largest sets of search windows '
+                                   'runs in (-1: every core); the answers are the same with any '
+                                   'number')
     search_sigma: float = param(0.1, 'width of the correlative likelihood, metres')
     search_cell: float = param(0.05, 'cell size of the search, metres (rounded to a whole number '
                                      'of map cells, at least one)')
@@ -174,9 +177,10 @@ class LocalizerConfig:
                        'min_position_std',
                        'min_yaw_std', 'min_points')
         check_numbers(self, positive, nonnegative)
-        if self.vote_workers != -1 and self.vote_workers < 1:
-            raise ValueError(f'LocalizerConfig.vote_workers must be -1 (every core) or at least '
-                             f'1, got {self.vote_workers!r}')
+        for name in ('vote_workers', 'search_workers'):
+            if getattr(self, name) != -1 and getattr(self, name) < 1:
+                raise ValueError(f'LocalizerConfig.{name} must be -1 (every core) or at least '
+                                 f'1, got {getattr(self, name)!r}')
         for name in ('min_confidence', 'search_twins_below', 'weak_min_confidence',
                      'search_twins_ratio'):
             if not 0.0 <= getattr(self, name) <= 1.0:

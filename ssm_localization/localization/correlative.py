@@ -30,6 +30,7 @@ from scipy.ndimage import binary_erosion
 from . import kernels
 from ..mapping.distance import clamped_squared_distance
 from ..mapping.occupancy import OccupancyMap
+from ..threads import in_parts
 from ..transforms import wrap_angle
 
 #: likelihood values are stored as uint8 (0..255)
@@ -40,6 +41,11 @@ HOT_BATCHES = 4
 #: windows scored at a time, so that their cell indices (8 bytes per window and point) stay in
 #: the cache; of 1024-32768 on the campus's captured searches 8192 was the fastest
 _SCORE_CHUNK = 8192
+#: a compiled scoring pass of at least this many look-ups (windows x points, about a
+#: millisecond) is split among the grid's ``workers`` threads: a thread's start and join cost
+#: tens of microseconds. At 2^18 Intel's and ACES' queries took 1-2 % longer, at 2^20 no
+#: longer, and office_30m's 0.91 of one thread's time (docs/EXPERIMENTS.md, 2026-12-07)
+_SPLIT_LOOKUPS = 1 << 20
 #: float32 holds every integer below this exactly (sums of up to 65 793 points' likelihoods)
 _FLOAT32_EXACT = 1 << 24
 _EMPTY_POOL = (np.zeros(0, np.int64), np.zeros(0))
@@ -78,14 +84,20 @@ class CorrelativeGrid:
     restricted to free cells (``free_thresh``). ``coarsen`` > 1 searches on cells that many map
     cells wide (the likelihood of a coarse cell is the best of its map cells, a coarse cell is
     free when one of them is): the leaves are that coarse, the search that much cheaper.
+    ``workers``: threads the compiled scoring of a large set of windows is split among (-1: every
+    core); the scores, and so the leaves, are the same with any number.
     """
 
     def __init__(self, occ_map: OccupancyMap, *, occupied_thresh: int = 65, free_thresh: int = 25,
                  sigma: float = 0.1, depth: int = 4, max_range: float = 30.0,
-                 coarsen: int = 1) -> None:
+                 coarsen: int = 1, workers: int = 1) -> None:
         if depth < 1 or coarsen < 1:
             raise ValueError(f'CorrelativeGrid: depth and coarsen must be >= 1, got {depth}, '
                              f'{coarsen}')
+        if workers != -1 and workers < 1:
+            raise ValueError(f'CorrelativeGrid: workers must be -1 (every core) or at least 1, '
+                             f'got {workers!r}')
+        self.workers = int(workers)
         if not (sigma > 0 and max_range > 0):
             raise ValueError('CorrelativeGrid: sigma and max_range must be > 0')
         self.resolution = occ_map.resolution * coarsen
@@ -398,8 +410,15 @@ class CorrelativeGrid:
         grid, k = self._levels[level], np.asarray(k)
         if kernels.window_sums is not None:      # one compiled pass (kernels.py)
             sums = np.empty(len(k), np.int32)
-            kernels.window_sums(grid, base, k.astype(np.int64, copy=False),
-                                cell.astype(np.int64, copy=False), sums)
+            yaw, at = k.astype(np.int64, copy=False), cell.astype(np.int64, copy=False)
+
+            def part(start: int, stop: int) -> None:
+                kernels.window_sums(grid, base, yaw[start:stop], at[start:stop],
+                                    sums[start:stop])
+
+            # each window's sum is its own: split among threads, the same integers
+            in_parts(part, len(k), self.workers if len(k) * base.shape[1] >= _SPLIT_LOOKUPS
+                     else 1)
             return sums * norm
         # Each window's sum as a product with ones in float32: exact while the sums stay below
         # 2^24 (N < 65 793 points), and three times faster than numpy's sum along rows of a few

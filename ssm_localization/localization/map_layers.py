@@ -50,7 +50,8 @@ def build_map_layers(index: MapIndex, cfg: LocalizerConfig,
         grid = CorrelativeGrid(m, occupied_thresh=thresh, sigma=cfg.search_sigma,
                                depth=cfg.search_depth, max_range=cfg.max_cast_range,
                                coarsen=search_coarsening(m.width * m.height, m.resolution,
-                                                         cfg))
+                                                         cfg),
+                               workers=cfg.search_workers)
     with layer(LAYER_NAMES[1]):
         # exact wherever the refinement, the evidence or the explained fraction can look
         reach = exact_reach(cfg.score_sigma, max(cfg.refine_radius))

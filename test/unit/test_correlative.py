@@ -13,6 +13,7 @@ from ssm_localization.localization.correlative import (CorrelativeGrid, likeliho
 from ssm_localization.localization.map_layers import search_coarsening
 from ssm_localization.mapping.map_io import OccupancyMap
 from ssm_localization.mapping.raycast import cast_rays
+from ssm_localization.threads import in_parts
 
 RES = 0.1
 
@@ -129,6 +130,38 @@ def test_how_windows_are_scored_changes_no_score(grid, monkeypatch, compiled, na
     assert np.array_equal(other.scores, whole.scores)
 
 
+@pytest.mark.parametrize('workers', [2, 3, -1])
+def test_windows_scored_in_threads_give_the_same_leaves(grid, monkeypatch, workers):
+    """Every compiled pass split among threads (``workers``): the same leaves, bit for bit."""
+    assert kernels.window_sums is not None, 'numba is a requirement (requirements.txt)'
+    occ_map = _rooms()
+    yaw0 = occ_map.origin[2] + 0.1
+    pts = _scan_from(occ_map, _cell_centre_pose(occ_map, 15, 45, yaw0))
+    yaws = yaw0 + np.radians([-1.0, 0.0, 1.0])
+    whole = grid.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    threaded = CorrelativeGrid(occ_map, depth=3, sigma=0.1, max_range=10.0, workers=workers)
+    parts = []
+    monkeypatch.setattr(correlative, '_SPLIT_LOOKUPS', 1)
+    monkeypatch.setattr(correlative, 'in_parts',
+                        lambda task, n, w: parts.append(w) or in_parts(task, n, w))
+    other = threaded.search(pts, yaws=yaws, min_score=0.3, ratio=0.7, max_leaves=10 ** 6)
+    assert parts and set(parts) == {workers}                  # every pass was split
+    assert len(whole.scores) > 10
+    assert np.array_equal(other.poses, whole.poses)
+    assert np.array_equal(other.scores, whole.scores)
+
+
+def test_small_passes_are_scored_in_the_calling_thread(grid, monkeypatch):
+    """Below ``_SPLIT_LOOKUPS`` look-ups a pass is not worth a thread's start."""
+    parts = []
+    monkeypatch.setattr(correlative, 'in_parts',
+                        lambda task, n, w: parts.append((n, w)) or in_parts(task, n, w))
+    threaded = CorrelativeGrid(_rooms(), depth=3, sigma=0.1, max_range=10.0, workers=2)
+    pts = _scan_from(_rooms(), _cell_centre_pose(_rooms(), 15, 45, 0.4))
+    threaded.search(pts, yaws=[0.4], min_score=0.3)
+    assert parts and all(w == 1 for n, w in parts if n * len(pts) < correlative._SPLIT_LOOKUPS)
+
+
 def test_the_compiled_window_sums_equal_the_python_loop():
     """The loop numba compiles gives the sums of its Python source, clipping included."""
     assert kernels.window_sums is not None, 'numba is a requirement (requirements.txt)'
@@ -216,6 +249,8 @@ def test_config_validation():
         CorrelativeGrid(_rooms(), depth=0)
     with pytest.raises(ValueError, match='sigma'):
         CorrelativeGrid(_rooms(), sigma=0.0)
+    with pytest.raises(ValueError, match='workers'):
+        CorrelativeGrid(_rooms(), workers=0)
 
 
 def test_likelihood_grid_is_the_dense_formula():

@@ -79,11 +79,12 @@ def test_from_dict_runs_dataclass_validation():
         from_dict(LocalizerConfig, {'top_n': 0})
 
 
+@pytest.mark.parametrize('name', ['vote_workers', 'search_workers'])
 @pytest.mark.parametrize('workers', [0, -2])
-def test_vote_workers_are_every_core_or_a_positive_count(workers):
-    with pytest.raises(ValueError, match='vote_workers'):
-        from_dict(LocalizerConfig, {'vote_workers': workers})
-    assert from_dict(LocalizerConfig, {'vote_workers': -1}).vote_workers == -1
+def test_workers_are_every_core_or_a_positive_count(name, workers):
+    with pytest.raises(ValueError, match=name):
+        from_dict(LocalizerConfig, {name: workers})
+    assert getattr(from_dict(LocalizerConfig, {name: -1}), name) == -1
 
 
 def test_flatten_unflatten_round_trip():
