@@ -44,6 +44,14 @@ def limit_blas_threads(environ: MutableMapping[str, str] | None = None) -> list[
     return unset
 
 
+def checked_workers(workers: int, owner: str) -> int:
+    """Return ``workers``, -1 (every core) or at least 1; else a ValueError naming ``owner``."""
+    if workers != -1 and workers < 1:
+        raise ValueError(f'{owner}: workers must be -1 (every core) or at least 1, got '
+                         f'{workers!r}')
+    return int(workers)
+
+
 def worker_count(workers: int) -> int:
     """Return the threads ``workers`` asks for: itself, or every core for -1."""
     return (os.cpu_count() or 1) if workers == -1 else max(int(workers), 1)

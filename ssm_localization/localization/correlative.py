@@ -30,7 +30,7 @@ from scipy.ndimage import binary_erosion
 from . import kernels
 from ..mapping.distance import clamped_squared_distance
 from ..mapping.occupancy import OccupancyMap
-from ..threads import in_parts
+from ..threads import checked_workers, in_parts
 from ..transforms import wrap_angle
 
 #: likelihood values are stored as uint8 (0..255)
@@ -94,10 +94,7 @@ class CorrelativeGrid:
         if depth < 1 or coarsen < 1:
             raise ValueError(f'CorrelativeGrid: depth and coarsen must be >= 1, got {depth}, '
                              f'{coarsen}')
-        if workers != -1 and workers < 1:
-            raise ValueError(f'CorrelativeGrid: workers must be -1 (every core) or at least 1, '
-                             f'got {workers!r}')
-        self.workers = int(workers)
+        self.workers = checked_workers(workers, 'CorrelativeGrid')
         if not (sigma > 0 and max_range > 0):
             raise ValueError('CorrelativeGrid: sigma and max_range must be > 0')
         self.resolution = occ_map.resolution * coarsen

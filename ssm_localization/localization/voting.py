@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 
 from ..mapping.index import MapIndex
 from ..matching.features import ScanFeatures
+from ..threads import checked_workers
 from ..transforms import apply
 
 #: the tree proposes this many times the wanted neighbours; exact distances pick among them
@@ -76,11 +77,9 @@ class PoseVoting:
                  search_dims: int = 12, workers: int = 1) -> None:
         if neighbours < 1 or not (bin_xy > 0 and bin_yaw > 0):
             raise ValueError('PoseVoting: neighbours >= 1 and positive bin sizes required')
-        if workers != -1 and workers < 1:
-            raise ValueError(f'PoseVoting: workers must be -1 or at least 1, got {workers!r}')
         #: threads of the tree query (scipy's ``workers``): each takes a share of the query
         #: points, so the neighbours are the same with any number
-        self.workers = int(workers)
+        self.workers = checked_workers(workers, 'PoseVoting')
         pos, ang, desc, node, rng = [], [], [], [], []
         for k, f in enumerate(index.features):
             pose = tuple(float(v) for v in index.node_sensor_pose[k])
