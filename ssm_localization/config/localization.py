@@ -64,6 +64,10 @@ class LocalizerConfig:
                                            'region): the search once more at this many further '
                                            'alignment yaws, its places decided together with '
                                            'the first ones')
+    search_more_spread: float = param(math.radians(3.0), "... and the first look's yaws once "
+                                                         'more, out to +- this (beyond '
+                                                         "search_spread): a scan's walls a few "
+                                                         "degrees off the map's, rad")
     weak_min_inliers: int = param(4, 'a failed answer on a map of several regions gets a weak '
                                      'look: the search once more in their own regions at the '
                                      'yaws of the vote peaks whose RANSAC pose has this many '
@@ -168,7 +172,7 @@ class LocalizerConfig:
                     'covariance_scale',
                     'sigma_d')
         nonnegative = ('vote_descriptor_dims', 'search_spread', 'search_alignments',
-                       'search_more_alignments', 'weak_min_inliers',
+                       'search_more_alignments', 'search_more_spread', 'weak_min_inliers',
                        'search_rivals', 'search_max_cells', 'search_twins_keep',
                        'search_twins_margin',
                        'refine_iterations', 'polish_iterations', 'surface_depth',

@@ -446,7 +446,10 @@ class GlobalLocalizer:
         For an answer that is not ``ok``: the search once more at the next
         ``search_more_alignments`` yaws aligning the scan's walls with the map's
         (``SearchRegions.plan``). A building whose walls run in more than two directions (a
-        museum's 45 degree halls) can put the right yaw beyond the first two alignments. Its
+        museum's 45 degree halls) can put the right yaw beyond the first two alignments. Then
+        the first look's yaws once more out to ``search_more_spread``: the walls a single scan
+        sees can run a few degrees off the map's, and a yaw 1.5 degrees off the truth may score
+        too little for a place (an Edmonton scan the search at every yaw finds). Its
         places join the first ones, refined and verified places included, and the answer is
         decided on all of them: a rival found before stays a rival. None when the second
         search finds no place, or is not to be run.

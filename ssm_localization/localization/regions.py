@@ -164,10 +164,11 @@ class SearchRegions:
         steps of ``search_step``. With one region: the yaws of ``GlobalLocalizer.search_yaws``,
         in the same order. ``more`` (the second look at an answer that is not ``ok``): instead
         only the next ``search_more_alignments`` alignment yaws of every region, those the
-        first plan did not search. ``weak`` (the weak look at a ``failed`` answer, see
-        ``GlobalLocalizer.weak_look``): instead only the yaws of these poses (the RANSAC poses
-        of weak vote peaks), each in its own region (none when it lies in none), those the
-        first plan did not search there.
+        first plan did not search, then the first plan's yaws once more out to
+        ``search_more_spread`` (:func:`ring_yaws`). ``weak`` (the weak look at a ``failed``
+        answer, see ``GlobalLocalizer.weak_look``): instead only the yaws of these poses (the
+        RANSAC poses of weak vote peaks), each in its own region (none when it lies in none),
+        those the first plan did not search there.
         """
         centres: list[tuple[float, int]] = []          # (yaw, region or -1: all)
         for pose in seeds:
@@ -187,19 +188,22 @@ class SearchRegions:
             for yaw in aligned[r][:first]:
                 if is_new_yaw(yaw, mine, cfg.search_step):
                     mine.append(float(yaw))
+            ring = np.zeros(0)
             if more:
                 searched, mine = mine, []
                 for yaw in aligned[r][first:]:
                     if is_new_yaw(yaw, searched + mine, cfg.search_step):
                         mine.append(float(yaw))
+                ring = ring_yaws(searched, cfg)
             elif len(weak):
                 searched, mine = mine, []
                 for pose, g in zip(weak, weak_regions):
                     if g == r and is_new_yaw(float(pose[2]), searched + mine, cfg.search_step):
                         mine.append(float(pose[2]))
-            if not mine:
+            if not mine and not len(ring):
                 continue
-            region_yaws = spread_yaws(mine, cfg)
+            region_yaws = spread_yaws(mine, cfg) if mine else np.zeros(0)
+            region_yaws = np.concatenate((region_yaws, not_near(ring, region_yaws, cfg)))
             yaws.append(region_yaws)
             mask = np.zeros((len(region_yaws), self.count), bool)
             mask[:, r] = True
@@ -233,6 +237,37 @@ def spread_yaws(centres: Sequence[float], cfg: LocalizerConfig) -> np.ndarray:
     base = np.concatenate((centres, np.asarray(centres) + math.pi))
     n = int(round(cfg.search_spread / cfg.search_step))
     return np.concatenate([base + cfg.search_step * k for k in range(-n, n + 1)])
+
+
+def ring_yaws(centres: Sequence[float], cfg: LocalizerConfig) -> np.ndarray:
+    """
+    Return the yaws beyond ``centres``' spread: each centre and flip +- ``search_more_spread``.
+
+    The steps of ``search_step`` further than ``search_spread`` from the centre, without the
+    yaws that lie within half a step of a yaw searched around another centre (the second look's
+    ring around the first look's yaws: a scan whose walls run a few degrees off the map's, where
+    the nearest first yaw scores too little for a place).
+    """
+    if not len(centres):
+        return np.zeros(0)
+    base = np.concatenate((centres, np.asarray(centres) + math.pi))
+    near = int(round(cfg.search_spread / cfg.search_step))
+    far = int(round(cfg.search_more_spread / cfg.search_step))
+    steps = [k for k in range(-far, far + 1) if abs(k) > near]
+    if not steps:
+        return np.zeros(0)
+    ring = np.concatenate([base + cfg.search_step * k for k in steps])
+    return not_near(ring, spread_yaws(centres, cfg), cfg)
+
+
+def not_near(yaws: np.ndarray, taken: np.ndarray, cfg: LocalizerConfig) -> np.ndarray:
+    """Return ``yaws`` (in order) without those within half a ``search_step`` of one before."""
+    out: list[float] = []
+    taken = list(np.asarray(taken, float))
+    for yaw in np.asarray(yaws, float):
+        if all(abs(wrap_angle(yaw - t)) > 0.5 * cfg.search_step for t in taken + out):
+            out.append(float(yaw))
+    return np.array(out)
 
 
 def _to_windows(origin: Pose2, window: float, xy: np.ndarray) -> np.ndarray:

@@ -14,8 +14,8 @@ from ssm_localization.localization.correlative import CorrelativeResult
 from ssm_localization.localization.localizer import (_by_correlation, Hypothesis, OK,
                                                      StageClock)
 from ssm_localization.localization.regions import (
-    pick_leaves, place_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, SearchPlan,
-    with_region_bests)
+    pick_leaves, place_leaves, REGION_BATCH, REGION_HOT_BATCHES, REGION_RATIO, ring_yaws,
+    SearchPlan, spread_yaws, with_region_bests)
 from ssm_localization.mapping.raycast import beam_angles, cast_rays
 from ssm_localization.transforms import apply, wrap_angle
 
@@ -103,28 +103,69 @@ def _first_plan(campus) -> tuple:
     return loc, query, seeds, loc.regions.plan(query.wall_angles, seeds, loc.config)
 
 
+def _apart(a, b):
+    """(len(a), len(b)) angles apart modulo a half turn."""
+    return np.abs(wrap_angle(2.0 * (np.asarray(a)[:, None] - np.asarray(b)[None, :]))) / 2.0
+
+
 def test_the_second_look_searches_each_region_at_its_next_alignments_only(campus):
     loc, query, seeds, first = _first_plan(campus)
-    cfg = loc.config
+    cfg = dataclasses.replace(loc.config, search_more_spread=loc.config.search_spread)
     more = loc.regions.plan(query.wall_angles, seeds, cfg, more=True)
     wider = loc.regions.alignment_yaws(
         query.wall_angles, cfg.search_alignments + cfg.search_more_alignments)
-
-    def apart(a, b):                    # (len(a), len(b)) angles apart modulo a half turn
-        return np.abs(wrap_angle(2.0 * (np.asarray(a)[:, None] - np.asarray(b)[None, :]))) / 2.0
-
     seeded = loc.regions.region_of(np.array([seeds[0][:2]]))[0]
     for r in range(loc.regions.count):
         new = more.yaws[more.allowed[:, r]]
         assert len(new), 'every region has further alignments'
         # every new yaw lies around one of the region's next alignments ...
         nxt = wider[r][cfg.search_alignments:]
-        assert (apart(new, nxt).min(axis=1) <= cfg.search_spread + 1e-9).all()
+        assert (_apart(new, nxt).min(axis=1) <= cfg.search_spread + 1e-9).all()
         # ... whose centre the first plan did not search (its first alignments, the seed's yaw)
-        centres = [y for y in nxt if apart(new, [y]).min() < 1e-9]
+        centres = [y for y in nxt if _apart(new, [y]).min() < 1e-9]
         old = list(wider[r][:cfg.search_alignments]) + ([0.3] if r == seeded else [])
-        assert centres and apart(centres, old).min() > cfg.search_step
-        assert apart(centres, first.yaws[first.allowed[:, r]]).min() > 0.0
+        assert centres and _apart(centres, old).min() > cfg.search_step
+        assert _apart(centres, first.yaws[first.allowed[:, r]]).min() > 0.0
+
+
+def test_the_second_look_searches_the_first_yaws_once_more_out_to_its_spread(campus):
+    loc, query, seeds, first = _first_plan(campus)
+    cfg = loc.config
+    assert cfg.search_more_spread > cfg.search_spread + cfg.search_step
+    narrow = loc.regions.plan(query.wall_angles, seeds,
+                              dataclasses.replace(cfg, search_more_spread=0.0), more=True)
+    more = loc.regions.plan(query.wall_angles, seeds, cfg, more=True)
+    for r in range(loc.regions.count):
+        old = first.yaws[first.allowed[:, r]]
+        alignments = narrow.yaws[narrow.allowed[:, r]]
+        new = more.yaws[more.allowed[:, r]]
+        # the further alignments first, as without the ring, then the ring
+        np.testing.assert_array_equal(new[:len(alignments)], alignments)
+        ring = new[len(alignments):]
+        assert len(ring)
+        near = np.abs(wrap_angle(ring[:, None] - old[None, :])).min(axis=1)
+        # beyond the first plan's yaws, within search_more_spread of its centres
+        assert (near > 0.5 * cfg.search_step).all()
+        assert (near <= cfg.search_more_spread - cfg.search_spread + 1e-9).all()
+        # no yaw searched twice
+        every = np.concatenate((alignments, ring))
+        gaps = np.abs(wrap_angle(every[:, None] - every[None, :])) + np.eye(len(every))
+        assert gaps.min() > 0.5 * cfg.search_step
+
+
+def test_the_ring_of_a_yaw_is_its_steps_beyond_the_spread():
+    cfg = LocalizerConfig()
+    step, far = cfg.search_step, int(round(cfg.search_more_spread / cfg.search_step))
+    ring = ring_yaws([0.5], cfg)
+    want = [0.5 + k * step + flip for flip in (0.0, math.pi)
+            for k in range(-far, far + 1) if abs(k) > 1]
+    np.testing.assert_allclose(np.sort(ring), np.sort(want))
+    # two centres 3 steps apart: the ring leaves out what the other's spread searches
+    two = ring_yaws([0.5, 0.5 + 3 * step], cfg)
+    searched = spread_yaws([0.5, 0.5 + 3 * step], cfg)
+    assert np.abs(wrap_angle(two[:, None] - searched[None, :])).min() > 0.5 * step
+    assert ring_yaws([], cfg).size == 0
+    assert ring_yaws([0.5], dataclasses.replace(cfg, search_more_spread=0.0)).size == 0
 
 
 def test_the_weak_look_searches_each_weak_pose_in_its_own_region_at_new_yaws_only(campus):
