@@ -202,7 +202,7 @@ class SearchRegions:
                         mine.append(float(pose[2]))
             if not mine and not len(ring):
                 continue
-            region_yaws = spread_yaws(mine, cfg) if mine else np.zeros(0)
+            region_yaws = spread_yaws(mine, cfg)
             region_yaws = np.concatenate((region_yaws, not_near(ring, region_yaws, cfg)))
             yaws.append(region_yaws)
             mask = np.zeros((len(region_yaws), self.count), bool)
@@ -234,9 +234,14 @@ def is_new_yaw(yaw: float, centres: Sequence[float], step: float) -> bool:
 
 def spread_yaws(centres: Sequence[float], cfg: LocalizerConfig) -> np.ndarray:
     """Return ``centres`` and their flips, each +- ``search_spread`` by ``search_step`` steps."""
-    base = np.concatenate((centres, np.asarray(centres) + math.pi))
     n = int(round(cfg.search_spread / cfg.search_step))
-    return np.concatenate([base + cfg.search_step * k for k in range(-n, n + 1)])
+    return _stepped(centres, range(-n, n + 1), cfg)
+
+
+def _stepped(centres: Sequence[float], steps, cfg: LocalizerConfig) -> np.ndarray:
+    """Return ``centres`` and their flips at each of ``steps`` (whole ``search_step``)."""
+    base = np.concatenate((centres, np.asarray(centres, float) + math.pi))
+    return np.concatenate([base + cfg.search_step * k for k in steps] or [np.zeros(0)])
 
 
 def ring_yaws(centres: Sequence[float], cfg: LocalizerConfig) -> np.ndarray:
@@ -248,24 +253,21 @@ def ring_yaws(centres: Sequence[float], cfg: LocalizerConfig) -> np.ndarray:
     ring around the first look's yaws: a scan whose walls run a few degrees off the map's, where
     the nearest first yaw scores too little for a place).
     """
-    if not len(centres):
-        return np.zeros(0)
-    base = np.concatenate((centres, np.asarray(centres) + math.pi))
     near = int(round(cfg.search_spread / cfg.search_step))
     far = int(round(cfg.search_more_spread / cfg.search_step))
-    steps = [k for k in range(-far, far + 1) if abs(k) > near]
-    if not steps:
-        return np.zeros(0)
-    ring = np.concatenate([base + cfg.search_step * k for k in steps])
+    ring = _stepped(centres, [k for k in range(-far, far + 1) if abs(k) > near], cfg)
     return not_near(ring, spread_yaws(centres, cfg), cfg)
 
 
 def not_near(yaws: np.ndarray, taken: np.ndarray, cfg: LocalizerConfig) -> np.ndarray:
     """Return ``yaws`` (in order) without those within half a ``search_step`` of one before."""
+    yaws, taken = np.asarray(yaws, float), np.asarray(taken, float)
+    if len(taken):
+        apart = np.abs(wrap_angle(yaws[:, None] - taken[None, :])).min(axis=1)
+        yaws = yaws[apart > 0.5 * cfg.search_step]
     out: list[float] = []
-    taken = list(np.asarray(taken, float))
-    for yaw in np.asarray(yaws, float):
-        if all(abs(wrap_angle(yaw - t)) > 0.5 * cfg.search_step for t in taken + out):
+    for yaw in yaws:
+        if all(abs(wrap_angle(yaw - t)) > 0.5 * cfg.search_step for t in out):
             out.append(float(yaw))
     return np.array(out)
 
