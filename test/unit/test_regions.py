@@ -155,10 +155,12 @@ def test_the_second_look_searches_the_first_yaws_once_more_out_to_its_spread(cam
 
 def test_the_ring_of_a_yaw_is_its_steps_beyond_the_spread():
     cfg = LocalizerConfig()
-    step, far = cfg.search_step, int(round(cfg.search_more_spread / cfg.search_step))
+    step = cfg.search_step
+    near, far = (int(round(spread / step)) for spread in (cfg.search_spread,
+                                                          cfg.search_more_spread))
     ring = ring_yaws([0.5], cfg)
     want = [0.5 + k * step + flip for flip in (0.0, math.pi)
-            for k in range(-far, far + 1) if abs(k) > 1]
+            for k in range(-far, far + 1) if abs(k) > near]
     np.testing.assert_allclose(np.sort(ring), np.sort(want))
     # two centres 3 steps apart: the ring leaves out what the other's spread searches
     two = ring_yaws([0.5, 0.5 + 3 * step], cfg)
