@@ -37,15 +37,21 @@ wrong prior (0.3-2.5 m and up to 20 deg off the truth, every 4th scan). The trac
 both confidence thresholds at 0, so that a wrong track it would keep by its rules alone is kept
 and labelled; its answers that the rules accept are fitted.
 
+``--recalibrate ANSWERS.csv`` refits only the global model's last step, the map from its
+probability to the fraction right, on the tuning split of a ``bench localize --answers`` run of
+the model that ships (``recalibrate``; the shipped model was recalibrated so on 2026-12-08).
+
 Usage::
 
     .venv/bin/python scripts/learn_confidence.py --data ../shared/data [--work bench_data]
     .venv/bin/python scripts/learn_confidence.py --data ../shared/data --tracker
+    .venv/bin/python scripts/learn_confidence.py --recalibrate answers.csv
 """
 from __future__ import annotations
 
 import argparse
 from collections import Counter
+import csv
 import dataclasses
 import datetime
 import json
@@ -61,11 +67,13 @@ sys.path.insert(0, str(ROOT))
 from ssm_localization.bench.data import data_dir, DATA_HELP  # noqa: E402
 from ssm_localization.bench.places import (answers_on, foreign, load_place,  # noqa: E402
                                            real_map, REAL_PLACES)
-from ssm_localization.config.confidence import REFUSED_REASONS  # noqa: E402
+from ssm_localization.config.confidence import CONFIDENCE_MODEL, REFUSED_REASONS  # noqa: E402
 from ssm_localization.config.localization import LocalizerConfig  # noqa: E402
 from ssm_localization.config.tracking import TrackerConfig  # noqa: E402
-from ssm_localization.evaluation.calibration import (BOOSTING, fit_confidence,  # noqa: E402
-                                                     format_reliability, reliability)
+from ssm_localization.evaluation.calibration import (BOOSTING, compose_calibration,  # noqa: E402
+                                                     fit_confidence, format_reliability,
+                                                     isotonic_knots, recalibration_points,
+                                                     reliability)
 from ssm_localization.evaluation.replay import within_success  # noqa: E402
 from ssm_localization.io.sensors import EVERYDAY_SENSORS  # noqa: E402
 from ssm_localization.io.sequences import (KIDNAP_AFTER, KIDNAP_BEFORE,  # noqa: E402
@@ -239,7 +247,13 @@ def main(argv=None) -> int:
     ap.add_argument('--fresh', action='store_true', help='localize again even if cached')
     ap.add_argument('--tracker', action='store_true',
                     help="fit the tracker's model (TRACK_CONFIDENCE_MODEL) instead")
+    ap.add_argument('--recalibrate', type=Path, metavar='ANSWERS_CSV',
+                    help="refit only the shipped model's probabilities: an isotonic map of the "
+                         'confidence the tuning split reported to the fraction right, from a '
+                         '`bench localize --answers` file')
     args = ap.parse_args(argv)
+    if args.recalibrate:
+        return recalibrate(args)
     args.data = data_dir(args.data)
     if args.tracker:
         return fit_tracker(args)
@@ -332,6 +346,66 @@ def fit_tracker(args) -> int:
         print(f'  {t:.2f} | ' + ' | '.join(parts))
     write_model(args, model, len(accepted), sum(labels))
     print('TRACK_CONFIDENCE_MODEL = ' + repr(model))
+    return 0
+
+
+def recalibrate(args) -> int:
+    """
+    Compose the shipped model's isotonic map with one fitted on a benchmark's tuning split.
+
+    The pipeline around the model keeps improving after a fit (second looks, twin and flip
+    checks): answers that reach the same evidence are then right more often than when the model
+    was fitted, and its probabilities grow cautious. This refits only the last step, the map
+    from the reported confidence to the fraction right, on the answers of ``bench localize
+    --answers`` that the model decided (``decided_by`` ``confidence``) on the *tuning* split;
+    the validation split is only printed. The composed map orders answers as before, so the
+    thresholds of ``LocalizerConfig`` carry over as ``new = map(old)`` (printed).
+    """
+    with open(args.recalibrate, newline='', encoding='utf-8') as f:
+        rows = [r for r in csv.DictReader(f) if r['decided_by'] == 'confidence']
+    split = {name: [(float(r['confidence']), r['right'] == '1') for r in rows
+                    if r['split'] == name] for name in ('tuning', 'validation')}
+    if not split['tuning']:
+        raise SystemExit(f'{args.recalibrate}: no tuning-split answers decided by the model')
+    old = CONFIDENCE_MODEL
+    agree = np.mean([abs(old.probability({f: float(r[f]) for f in old.features})
+                         - float(r['confidence'])) < 1e-3 for r in rows])
+    if agree < 0.9:                 # a few differ: rounded features at a tree's split
+        raise SystemExit(f'{args.recalibrate}: only {agree:.0%} of its confidences are the '
+                         f"shipped model's; recalibrate from a run of the model that ships")
+    conf = np.array([c for c, _ in split['tuning']])
+    right = np.array([y for _, y in split['tuning']], dtype=float)
+    outer = isotonic_knots(conf, right)
+    model = dataclasses.replace(old, calibration=compose_calibration(old.calibration, outer))
+    xs, qs = recalibration_points(outer)
+
+    def new(c: float) -> float:
+        return float(np.interp(c, xs, qs))
+
+    print(f'{len(conf)} tuning answers decided by the model ({int(right.sum())} right); '
+          f'the map of their confidence to the fraction right ({len(outer)} knots):')
+    for c, q in outer:
+        print(f'  {c:.4f} -> {q:.4f}')
+    for name, answers in split.items():
+        print(f'{name} split ({len(answers)} answers): before')
+        print(format_reliability(reliability([c for c, _ in answers], [y for _, y in answers])))
+        print(f'{name} split: after')
+        print(format_reliability(reliability([new(c) for c, _ in answers],
+                                             [y for _, y in answers])))
+    print('threshold then -> now | by split: ok, wrong ok')
+    for t in THRESHOLDS:
+        parts = [f'{name} {sum(c >= t for c, _ in a)}, {sum(c >= t and not y for c, y in a)}'
+                 for name, a in split.items()]
+        print(f'  {t:.2f} -> {new(t):.4f} | ' + ' | '.join(parts))
+    doc = json.loads(Path(DEFAULT_OUT).read_text())
+    doc['model'] = json.loads(json.dumps(dataclasses.asdict(model)))
+    doc['recalibrated'] = {'by': 'scripts/learn_confidence.py --recalibrate',
+                           'date': datetime.date.today().isoformat(),
+                           'answers': int(len(conf)), 'right': int(right.sum()),
+                           'outer': [list(k) for k in outer],
+                           'fitted': [list(k) for k in old.calibration]}
+    args.out.write_text(json.dumps(doc, indent=None, separators=(',', ':')) + '\n')
+    print(f'wrote {args.out}')
     return 0
 
 

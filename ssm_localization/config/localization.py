@@ -73,9 +73,9 @@ class LocalizerConfig:
                                      'yaws of the vote peaks whose RANSAC pose has this many '
                                      'inliers or more but fewer than fine_min_inliers, its places '
                                      'decided together with the first ones (0: off)')
-    weak_min_confidence: float = param(0.99, 'an answer the weak look turns ok stays ok only '
-                                             'with this confidence or more, after its twin '
-                                             'check (else ambiguous)')
+    weak_min_confidence: float = param(0.9985, 'an answer the weak look turns ok stays ok '
+                                               'only with this confidence or more, after its '
+                                               'twin check (else ambiguous)')
     search_twins: bool = param(True, 'an ok answer on a map of several regions (a campus) is '
                                      'checked for twins: the search once more in every region '
                                      "at the answer's yaw and its flip, its places decided "
@@ -135,10 +135,9 @@ class LocalizerConfig:
         0.1, 'a distinct pose that explains at least as much of the scan as the best and sees '
              'through at most this much more of its beams is a rival too (ambiguous): the best '
              "then wins only on beams through the map's specks")
-    min_confidence: float = param(0.94, 'a pose that passes the rules is ok only when its '
+    min_confidence: float = param(0.98, 'a pose that passes the rules is ok only when its '
                                         'calibrated confidence P(right | evidence) reaches '
-                                        'this (the lowest, in steps of 0.01, at which the '
-                                        "calibration split's answers gain no wrong ok)")
+                                        'this (the tuning split: 99.94 % of such answers right)')
     distinct_xy: float = param(0.5, 'poses further apart than this are distinct, metres')
     distinct_yaw: float = param(math.radians(10.0), '... or than this, rad')
     max_position_std: float = param(0.25, 'a larger reported position std along the weakest '

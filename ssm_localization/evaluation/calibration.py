@@ -216,6 +216,51 @@ def isotonic_knots(z: np.ndarray, y: np.ndarray, weight: np.ndarray | None = Non
     return tuple((float(b[2] / b[0]), float(p)) for b, p in zip(blocks, probs))
 
 
+def recalibration_points(outer: Sequence[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return ``(probabilities, new probabilities)`` of a recalibration map, ready for ``np.interp``.
+
+    ``outer``'s knots inside (0, 1), extended to ``(0, 0)`` and ``(1, 1)`` and made strictly
+    increasing (a stretch that would be flat rises by 1e-9 a knot), so that the map keeps every
+    pair of answers in the order the model's own map puts them.
+    """
+    pts = sorted((float(c), float(q)) for c, q in outer if 0.0 < c < 1.0)
+    pts = [(0.0, 0.0)] + pts + [(1.0, 1.0)]
+    xs = np.array([c for c, _ in pts])
+    qs = np.array([q for _, q in pts])
+    for k in range(1, len(qs)):
+        qs[k] = min(max(qs[k], qs[k - 1] + 1e-9), 1.0)
+    return xs, qs
+
+
+def compose_calibration(knots: Sequence[tuple[float, float]],
+                        outer: Sequence[tuple[float, float]]) -> tuple[tuple[float, float], ...]:
+    """
+    Return the knots of the map ``knots`` followed by the map ``outer``.
+
+    ``knots`` maps log-odds to a probability, ``outer`` a probability to a probability; both
+    are piecewise linear and held constant beyond their ends. A recalibration: ``outer`` maps
+    the probabilities a model reports to the fraction of its answers that were right
+    (``isotonic_knots`` of labelled answers on their reported confidence), made strictly
+    increasing by :func:`recalibration_points`, so the composed map orders every pair of
+    answers as the model's own map does, and a threshold ``t`` on the old probability is the
+    threshold ``outer(t)`` on the new. The result is exact: its knots are those of ``knots``
+    and the log-odds where the old probability crosses a knot of ``outer``.
+    """
+    if not knots:
+        raise ValueError('compose_calibration: the model has no isotonic map to compose with')
+    xs, qs = recalibration_points(outer)
+    zs = [float(z) for z, _ in knots]
+    ps = [float(p) for _, p in knots]
+    out = [(zs[0], ps[0])]
+    for (z0, p0), (z1, p1) in zip(zip(zs, ps), zip(zs[1:], ps[1:])):
+        if p1 > p0:                 # the old map crosses these knots of outer in (z0, z1)
+            for c in xs[(xs > p0) & (xs < p1)]:
+                out.append((z0 + (z1 - z0) * (c - p0) / (p1 - p0), float(c)))
+        out.append((z1, p1))
+    return tuple((z, float(np.interp(p, xs, qs))) for z, p in out)
+
+
 def fit_confidence(values: Sequence[dict[str, float]], right: Sequence[bool],
                    features: Sequence[str], groups: Sequence[str], l2: float = 10.0,
                    weight: Sequence[float] | None = None, refused: dict[str, float] | None = None,

@@ -483,12 +483,14 @@ class GlobalLocalizer:
         each weak pose's region is searched at its yaw (and flip), those the first plan did not
         search there; the places found join the first ones (a rival found before stays a
         rival). An answer this turns ``ok`` is twin-checked whatever its confidence and stays
-        ``ok`` only from ``weak_min_confidence`` (0.99), else it is ``ambiguous``. Measured
-        without the bar (docs/EXPERIMENTS.md, 2026-12-03): on the campus benchmark 28 ``failed``
-        answers turned right (0.963-0.9996) and none wrong over two query draws (900 and 1770
-        scans, sharing some); on the 30 M-cell office over 16 query seeds one turned wrong, at
-        0.957, and none right; the bar keeps 25 of the campus's 28. None when there is nothing
-        to search or the map has one region (its ``second_look`` searches further alignments
+        ``ok`` only from ``weak_min_confidence`` (0.9985; before the recalibration of
+        2026-12-08 such an answer said 0.9899 there, and the bar was 0.99), else it is
+        ``ambiguous``. Measured without the bar (docs/EXPERIMENTS.md, 2026-12-03, confidences
+        as then reported): on the campus benchmark 28 ``failed`` answers turned right
+        (0.963-0.9996) and none wrong over two query draws (900 and 1770 scans, sharing some);
+        on the 30 M-cell office over 16 query seeds one turned wrong, at 0.957, and none right;
+        the bar keeps 25 of the campus's 28. None when there is nothing to search or the map
+        has one region (its ``second_look`` searches further alignments
         everywhere).
         """
         cfg = self.config

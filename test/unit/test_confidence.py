@@ -17,8 +17,11 @@ import pytest
 from ssm_localization import build_index, GlobalLocalizer, read_bag
 from ssm_localization.config.confidence import (CONFIDENCE_MODEL, ConfidenceModel, load_model,
                                                 TRACK_CONFIDENCE_MODEL)
-from ssm_localization.evaluation.calibration import (BOOSTING, fit_confidence, isotonic_knots,
-                                                     reliability, tree_values)
+from ssm_localization.config.localization import LocalizerConfig
+from ssm_localization.evaluation.calibration import (BOOSTING, compose_calibration,
+                                                     fit_confidence, isotonic_knots,
+                                                     recalibration_points, reliability,
+                                                     tree_values)
 from ssm_localization.files.yaml_input import load_yaml_file
 from ssm_localization.localization.confidence import (feature_values, resolution_warning,
                                                       within_circle, within_right)
@@ -125,6 +128,43 @@ def test_calibrated_probability_interpolates_the_knots():
     assert dataclasses.replace(model, calibration=()).calibrated(0.0) == 0.5
     with pytest.raises(ValueError, match='knots'):
         dataclasses.replace(model, calibration=((1.0, 0.9), (-1.0, 0.1)))
+
+
+def test_a_recalibration_composes_exactly_and_keeps_the_order():
+    """compose_calibration: the model's map, then a map of its probability to the right rate."""
+    inner = ((-2.0, 0.1), (0.0, 0.5), (1.0, 0.5), (3.0, 0.95))        # with a flat stretch
+    outer = ((0.2, 0.1), (0.6, 0.8), (0.9, 0.99))
+    composed = dataclasses.replace(CONFIDENCE_MODEL,
+                                   calibration=compose_calibration(inner, outer))
+    old = dataclasses.replace(CONFIDENCE_MODEL, calibration=inner)
+    xs, qs = recalibration_points(outer)
+    assert xs[0] == 0.0 and xs[-1] == 1.0 and np.all(np.diff(qs) > 0)
+    z = np.linspace(-4.0, 5.0, 301)
+    new = np.array([composed.calibrated(v) for v in z])
+    assert new == pytest.approx(np.interp([old.calibrated(v) for v in z], xs, qs))
+    assert np.all(np.diff(new) >= 0)
+    # strictly increasing wherever the old map is: a threshold carries over exactly
+    rising = np.diff([old.calibrated(v) for v in z]) > 0
+    assert np.all(np.diff(new)[rising] > 0)
+    t = 0.7
+    assert all((old.calibrated(v) >= t) == (composed.calibrated(v) >= np.interp(t, xs, qs))
+               for v in z)
+    with pytest.raises(ValueError, match='no isotonic map'):
+        compose_calibration((), outer)
+
+
+def test_the_shipped_recalibration_is_recorded_and_reproduced():
+    """The shipped map is the fitted one composed with the recorded recalibration."""
+    doc = json.loads((REPO / 'ssm_localization' / 'config' / 'confidence_model.json').read_text())
+    again = doc['recalibrated']
+    assert again['answers'] > 1000 and 0 < again['right'] <= again['answers']
+    outer = [tuple(k) for k in again['outer']]
+    fitted = tuple(tuple(k) for k in again['fitted'])
+    assert np.array(compose_calibration(fitted, outer)) == pytest.approx(
+        np.array(CONFIDENCE_MODEL.calibration))
+    # ok is no looser than before the recalibration: min_confidence on the fitted map's scale
+    xs, qs = recalibration_points(outer)
+    assert np.interp(LocalizerConfig().min_confidence, qs, xs) >= 0.93
 
 
 def test_within_right_is_the_gaussian_mass_inside_the_success_bounds():
