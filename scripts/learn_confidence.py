@@ -362,7 +362,8 @@ def recalibrate(args) -> int:
     thresholds of ``LocalizerConfig`` carry over as ``new = map(old)`` (printed).
     """
     with open(args.recalibrate, newline='', encoding='utf-8') as f:
-        rows = [r for r in csv.DictReader(f) if r['decided_by'] == 'confidence']
+        every = list(csv.DictReader(f))
+    rows = [r for r in every if r['decided_by'] == 'confidence']
     split = {name: [(float(r['confidence']), r['right'] == '1') for r in rows
                     if r['split'] == name] for name in ('tuning', 'validation')}
     if not split['tuning']:
@@ -377,6 +378,15 @@ def recalibrate(args) -> int:
     right = np.array([y for _, y in split['tuning']], dtype=float)
     outer = isotonic_knots(conf, right)
     model = dataclasses.replace(old, calibration=compose_calibration(old.calibration, outer))
+    # the best of a pair of look-alikes: how often right where the model says more than 2/3
+    pairs = [r for r in every if r['split'] == 'tuning' and r['decided_by'] == 'rival'
+             and r['look_alikes'] == '2'
+             and model.probability({f: float(r[f]) for f in model.features}) > 2.0 / 3.0]
+    if pairs:
+        model = dataclasses.replace(model, pair=round(float(np.mean(
+            [r['right'] == '1' for r in pairs])), 4))
+    print(f'pairs of look-alikes the model puts above 2/3 on the tuning split: {len(pairs)}, '
+          f'the best right {model.pair:.3f} of the time (ConfidenceModel.pair)')
     xs, qs = recalibration_points(outer)
 
     def new(c: float) -> float:

@@ -56,13 +56,19 @@ class ConfidenceModel:
     #: too much seen through walls or too little explained; ``rival``: a distinct pose scores
     #: about as well; ``degenerate``: the position is undetermined along some direction), the
     #: rate at which such answers were right on the calibration split (``rival`` as measured;
-    #: the verdict reports ``min(P, 2/(k+1))`` for those, ``localizer.verdict``)
+    #: the verdict reports ``min(P, pair)`` or ``min(P, 2/(k+1))`` for those, ``verdict``)
     refused: dict[str, float] = field(default_factory=lambda: dict(REFUSED_REASONS))
     calibration: tuple[tuple[float, float], ...] = ()
     split: str = ''
     trees: tuple[tuple[tuple[int, float, int, int, float], ...], ...] = ()
+    #: the most an answer refused for one distinct rival (a pair of look-alikes) reports: the
+    #: rate at which the best of such a pair was right where the model said more (the verdict
+    #: reports ``min(P, pair)``, and ``min(P, 2/(k+1))`` for k > 2 look-alikes)
+    pair: float = 2.0 / 3.0
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.pair <= 1.0:
+            raise ValueError(f'ConfidenceModel.pair: a rate in [0, 1], got {self.pair!r}')
         if set(self.refused) != set(REFUSED_REASONS) or not all(
                 0.0 <= v <= 1.0 for v in self.refused.values()):
             raise ValueError(f'ConfidenceModel.refused: a rate in [0, 1] for each of '
@@ -124,7 +130,7 @@ class ConfidenceModel:
         return cls(**tuples, intercept=float(doc['intercept']),
                    refused={k: float(v) for k, v in doc['refused'].items()},
                    calibration=tuple((float(z), float(p)) for z, p in doc['calibration']),
-                   split=str(doc.get('split', '')),
+                   split=str(doc.get('split', '')), pair=float(doc.get('pair', 2.0 / 3.0)),
                    trees=tuple(tuple((int(f), float(t), int(lo), int(hi), float(v))
                                      for f, t, lo, hi, v in tree)
                                for tree in doc.get('trees', ())))

@@ -1061,11 +1061,14 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence |
     it reaches ``min_confidence``, else ``ambiguous`` (at least 0.5: more likely right than not)
     or ``failed``. An answer the rules refuse reports the rate at which such answers were right
     on the calibration split (``ConfidenceModel.refused``), except one refused for its rivals:
-    ``min(P(right | evidence), 2 / (k + 1))`` for ``k`` distinct poses that fit about equally
-    well, as if the best of them were twice as likely as each of the others (its lead, however
-    small, is evidence: on the tuning split such answers were right 22 % of the time; this rule
-    says 22 %, and 58 % where 60 % were right for those it puts at 0.4 or more; ``min(P, 1 /
-    k)`` said 18 %, and 50 % where 72 % were right; docs/BENCHMARKS.md).
+    ``min(P(right | evidence), 2 / (k + 1))`` for ``k`` > 2 distinct poses that fit about
+    equally well, as if the best of them were twice as likely as each of the others (its lead,
+    however small, is evidence: on the tuning split such answers were right 22 % of the time;
+    this rule says 22 %, and 58 % where 60 % were right for those it puts at 0.4 or more;
+    ``min(P, 1 / k)`` said 18 %, and 50 % where 72 % were right; docs/BENCHMARKS.md), and
+    ``min(P, ConfidenceModel.pair)`` for a pair: the rate at which the best of a pair was right
+    on the tuning split where the model said more than 2/3 (0.854 on 2026-12-08, where 2/3
+    had been 19-20 points cautious on both splits).
     """
     best = ranked[0]
     cov = best.covariance if best.covariance is not None else np.diag([1e3, 1e3, 1e3])
@@ -1092,7 +1095,8 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence |
         return AMBIGUOUS, (f'{len(rivals) + 1} distinct poses fit about equally well '
                            f'(scores {best.score:.2f} and '
                            f'{max(h.score for h in rivals):.2f}{why})'), cov, \
-            min(confidence(evidence, model), 2.0 / (len(rivals) + 2))
+            min(confidence(evidence, model),
+                model.pair if len(rivals) == 1 else 2.0 / (len(rivals) + 2))
     std = position_std(cov)
     if std > cfg.max_position_std:
         return AMBIGUOUS, (f'degenerate geometry (e.g. a corridor): position std {std:.2f} m '

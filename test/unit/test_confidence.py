@@ -162,6 +162,8 @@ def test_the_shipped_recalibration_is_recorded_and_reproduced():
     fitted = tuple(tuple(k) for k in again['fitted'])
     assert np.array(compose_calibration(fitted, outer)) == pytest.approx(
         np.array(CONFIDENCE_MODEL.calibration))
+    with pytest.raises(ValueError, match='pair'):
+        dataclasses.replace(CONFIDENCE_MODEL, pair=1.5)
     # ok is no looser than before the recalibration: min_confidence on the fitted map's scale
     xs, qs = recalibration_points(outer)
     assert np.interp(LocalizerConfig().min_confidence, qs, xs) >= 0.93

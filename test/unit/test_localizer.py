@@ -460,7 +460,7 @@ def test_a_place_that_explains_more_but_sees_through_a_few_more_specks_is_a_riva
         assert status == want, (rival.explained, rival.contradicting, msg)
         if want == 'ambiguous':
             assert 'explains more of the scan, 90% against 89%' in msg
-            assert conf <= 2.0 / 3.0 and cov[0, 0] >= 8.0 ** 2
+            assert conf <= CONFIDENCE_MODEL.pair and cov[0, 0] >= 8.0 ** 2
     # a rival that explains more but scores too little to be an answer at all is none
     weak = dataclasses.replace(place(17.0, 0.95, 0.2), score=cfg.min_score - 0.01)
     assert verdict([best, weak], cfg, STRONG)[0] == 'ok'
@@ -500,14 +500,19 @@ def test_verdict_asks_the_confidence_once_the_rules_pass():
     status, _, _, conf = verdict([best], cfg, None)
     assert status == 'failed' and conf == 0.0
     # a refused answer reports the rate at which such answers were right when calibrating;
-    # one refused for its rivals at most 2 / (k + 1): k poses fit, the best counts double
+    # one refused for its rivals at most 2 / (k + 1): k poses fit, the best counts double;
+    # a pair at most the rate at which the best of a pair was right (ConfidenceModel.pair)
     rival = _verified((5.0, 0.0, 0.0), 0.8)
     third = _verified((0.0, 6.0, 0.0), 0.8)
+    assert 2.0 / 3.0 < CONFIDENCE_MODEL.pair < 1.0
     assert verdict([best, rival], cfg, STRONG)[0] == 'ambiguous'
-    assert verdict([best, rival], cfg, STRONG)[3] == pytest.approx(2.0 / 3.0)
+    assert verdict([best, rival], cfg, STRONG)[3] == pytest.approx(CONFIDENCE_MODEL.pair)
     assert verdict([best, rival, third], cfg, STRONG)[3] == pytest.approx(0.5)
-    assert verdict([best, rival], cfg, weak)[3] == pytest.approx(min(2.0 / 3.0, verdict(
-        [best], cfg, weak)[3]))
+    assert verdict([best, rival], cfg, weak)[3] == pytest.approx(min(CONFIDENCE_MODEL.pair,
+                                                                     verdict([best], cfg,
+                                                                             weak)[3]))
+    halves = dataclasses.replace(CONFIDENCE_MODEL, pair=0.5)
+    assert verdict([best, rival], cfg, STRONG, halves)[3] == pytest.approx(0.5)
     assert verdict([best, rival], cfg, None)[3] == 0.0
     assert verdict([_verified((0.0, 0.0, 0.0), 0.8, 1.5 * cfg.max_position_std)], cfg,
                    STRONG)[3] == CONFIDENCE_MODEL.refused['degenerate']
