@@ -359,7 +359,10 @@ def recalibrate(args) -> int:
     from the reported confidence to the fraction right, on the answers of ``bench localize
     --answers`` that the model decided (``decided_by`` ``confidence``) on the *tuning* split;
     the validation split is only printed. The composed map orders answers as before, so the
-    thresholds of ``LocalizerConfig`` carry over as ``new = map(old)`` (printed).
+    thresholds of ``LocalizerConfig`` carry over as ``new = map(old)`` (printed). With it, the
+    cap of a pair of look-alikes (``ConfidenceModel.pair``): the rate at which the tuning
+    split's answers refused for one distinct rival were right where the recalibrated model
+    says more than 2/3.
     """
     with open(args.recalibrate, newline='', encoding='utf-8') as f:
         every = list(csv.DictReader(f))
