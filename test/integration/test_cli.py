@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from ssm_localization import read_bag, save_map_yaml, write_bag
 from ssm_localization.cli.main import main
+from ssm_localization.config.confidence import CONFIDENCE_MODEL
 from ssm_localization.config.localization import LocalizerConfig
 from ssm_localization.mapping.map_io import OccupancyMap
 
@@ -347,9 +348,10 @@ def test_bench_localize_writes_every_answer_it_graded(tmp_path, capsys):
         if r['status'] == 'ok':
             assert r['decided_by'] == 'confidence'
             assert confidence >= LocalizerConfig().min_confidence
-        if r['decided_by'] == 'rival':
-            assert int(r['look_alikes']) >= 2
-            assert confidence <= 2.0 / (int(r['look_alikes']) + 1) + 1e-6
+        if r['decided_by'] == 'rival':          # a pair at most CONFIDENCE_MODEL.pair
+            k = int(r['look_alikes'])
+            assert k >= 2
+            assert confidence <= (CONFIDENCE_MODEL.pair if k == 2 else 2.0 / (k + 1)) + 1e-6
         if r['decided_by'] == 'no pose':
             assert confidence == 0.0 and r['explained'] == ''
         else:
