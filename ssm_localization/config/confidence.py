@@ -93,6 +93,14 @@ class ConfidenceModel:
             raise ValueError('ConfidenceModel: means, weights, tree nodes and the intercept '
                              'must be finite and scales > 0')
 
+    def rival_cap(self, k: int) -> float:
+        """
+        Return the most an answer refused for ``k`` distinct poses that fit as well reports.
+
+        A pair: ``pair``; more: ``2/(k+1)``, as if the best were twice as likely as each other.
+        """
+        return self.pair if k <= 2 else 2.0 / (k + 1)
+
     def logit(self, values: dict[str, float]) -> float:
         """Return the log-odds of a right pose given the feature ``values`` by name."""
         z = self.intercept
@@ -130,7 +138,7 @@ class ConfidenceModel:
         return cls(**tuples, intercept=float(doc['intercept']),
                    refused={k: float(v) for k, v in doc['refused'].items()},
                    calibration=tuple((float(z), float(p)) for z, p in doc['calibration']),
-                   split=str(doc.get('split', '')), pair=float(doc.get('pair', 2.0 / 3.0)),
+                   split=str(doc.get('split', '')), pair=float(doc.get('pair', cls.pair)),
                    trees=tuple(tuple((int(f), float(t), int(lo), int(hi), float(v))
                                      for f, t, lo, hi, v in tree)
                                for tree in doc.get('trees', ())))

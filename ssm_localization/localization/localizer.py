@@ -1095,8 +1095,7 @@ def verdict(ranked: list[Hypothesis], cfg: LocalizerConfig, evidence: Evidence |
         return AMBIGUOUS, (f'{len(rivals) + 1} distinct poses fit about equally well '
                            f'(scores {best.score:.2f} and '
                            f'{max(h.score for h in rivals):.2f}{why})'), cov, \
-            min(confidence(evidence, model),
-                model.pair if len(rivals) == 1 else 2.0 / (len(rivals) + 2))
+            min(confidence(evidence, model), model.rival_cap(len(rivals) + 1))
     std = position_std(cov)
     if std > cfg.max_position_std:
         return AMBIGUOUS, (f'degenerate geometry (e.g. a corridor): position std {std:.2f} m '

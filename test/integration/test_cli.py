@@ -351,7 +351,7 @@ def test_bench_localize_writes_every_answer_it_graded(tmp_path, capsys):
         if r['decided_by'] == 'rival':          # a pair at most CONFIDENCE_MODEL.pair
             k = int(r['look_alikes'])
             assert k >= 2
-            assert confidence <= (CONFIDENCE_MODEL.pair if k == 2 else 2.0 / (k + 1)) + 1e-6
+            assert confidence <= CONFIDENCE_MODEL.rival_cap(k) + 1e-6
         if r['decided_by'] == 'no pose':
             assert confidence == 0.0 and r['explained'] == ''
         else:

@@ -511,6 +511,8 @@ def test_verdict_asks_the_confidence_once_the_rules_pass():
     assert verdict([best, rival], cfg, weak)[3] == pytest.approx(min(CONFIDENCE_MODEL.pair,
                                                                      verdict([best], cfg,
                                                                              weak)[3]))
+    assert [CONFIDENCE_MODEL.rival_cap(k) for k in (2, 3, 4)] == pytest.approx(
+        [CONFIDENCE_MODEL.pair, 0.5, 0.4])
     halves = dataclasses.replace(CONFIDENCE_MODEL, pair=0.5)
     assert verdict([best, rival], cfg, STRONG, halves)[3] == pytest.approx(0.5)
     assert verdict([best, rival], cfg, None)[3] == 0.0
